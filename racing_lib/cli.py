@@ -1,0 +1,337 @@
+"""The ``racing-lib`` command.
+
+Sub-commands (see ``racing-lib --help``): ``tracks``, ``plan``, ``lap``. With ``--json`` a command
+prints exactly one JSON object on standard output; everything meant for a person goes to standard
+error. Errors of racing_lib are printed as one line (``error: ...``) with exit status 2, never as a
+traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from collections.abc import Sequence
+from pathlib import Path as FilePath
+from typing import Any
+
+from racing_lib.errors import RacingLibError
+
+DEFAULT_TRACK = "expressway"
+
+
+def _say(*parts: object) -> None:
+    """Human-readable output: always standard error, so that stdout stays pure JSON."""
+    print(*parts, file=sys.stderr)
+
+
+def _clean(obj: Any) -> Any:
+    """Make an object JSON-safe: NaN and infinities become null."""
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    if isinstance(obj, dict):
+        return {k: _clean(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [_clean(v) for v in obj]
+    return obj
+
+
+def _emit_json(obj: dict[str, Any]) -> None:
+    print(json.dumps(_clean(obj), allow_nan=False))
+
+
+# --------------------------------------------------------------------------------------------------
+# tracks
+
+
+def cmd_tracks(args: argparse.Namespace) -> int:
+    """List the built-in tracks with their length, width range and boundary kind."""
+    import numpy as np
+
+    from racing_lib.track import builtin_track_names, load_track
+
+    rows = []
+    for name in builtin_track_names():
+        track = load_track(name)
+        s = np.linspace(0.0, track.length, 2000, endpoint=False)
+        width = track.width_left(s) + track.width_right(s)
+        kappa = np.abs(track.centerline.curvature(s))
+        z = track.elevation(s)
+        rows.append(
+            {
+                "name": name,
+                "length_m": round(float(track.length), 1),
+                "width_min_m": round(float(width.min()), 2),
+                "width_max_m": round(float(width.max()), 2),
+                "min_radius_m": round(float(1.0 / kappa.max()), 1),
+                "elevation_range_m": round(float(z.max() - z.min()), 2),
+                "boundary": track.boundary,
+            }
+        )
+    if args.json:
+        _emit_json({"tracks": rows})
+    else:
+        header = f"{'name':<12} {'length':>9} {'width':>13} {'min R':>8} {'dz':>7}  boundary"
+        print(header)
+        for r in rows:
+            print(
+                f"{r['name']:<12} {r['length_m']:>7.1f} m "
+                f"{r['width_min_m']:>5.1f}-{r['width_max_m']:<5.1f}m "
+                f"{r['min_radius_m']:>6.1f} m {r['elevation_range_m']:>5.1f} m  {r['boundary']}"
+            )
+    return 0
+
+
+# --------------------------------------------------------------------------------------------------
+# plan and lap share the way a plan is obtained
+
+
+def _model_options(args: argparse.Namespace):
+    from racing_lib.model import ModelOptions
+
+    return ModelOptions(
+        drag=not args.no_drag,
+        longitudinal_weight_transfer=not args.no_weight_transfer,
+        lateral_weight_transfer=args.lateral_weight_transfer,
+    )
+
+
+def _make_plan(args: argparse.Namespace, track):
+    """Plan ``track`` with the method and model options on the command line."""
+    from racing_lib.planning import plan
+
+    return plan(track, method=args.method, options=_model_options(args))
+
+
+def cmd_plan(args: argparse.Namespace) -> int:
+    """Plan a lap and optionally save it as a plan CSV."""
+    from racing_lib.track import load_track
+
+    track = load_track(args.track)
+    _say(f"planning {track.name} ({track.length:.0f} m) with method '{args.method}' ...")
+    result = _make_plan(args, track)
+    traj = result.trajectory
+    if args.out:
+        traj.save_csv(args.out)
+        _say(f"plan written to {args.out}")
+    fields = {
+        "track": track.name,
+        "method": args.method,
+        "length_m": float(track.length),
+        "nodes": int(len(traj.s)),
+        "lap_time_s": float(traj.lap_time),
+        "solve_time_s": float(result.solve_time),
+        "iterations": int(result.iterations),
+        "status": str(result.status),
+    }
+    if args.json:
+        _emit_json(fields)
+    else:
+        print(
+            f"{fields['track']}: {fields['method']} plan, {fields['nodes']} nodes, planned lap "
+            f"{fields['lap_time_s']:.2f} s, solved in {fields['solve_time_s']:.2f} s "
+            f"({fields['iterations']} iterations, {fields['status']})"
+        )
+    return 0
+
+
+def cmd_lap(args: argparse.Namespace) -> int:
+    """Drive laps in closed loop and report their metrics."""
+    from racing_lib.experiment import LapSpec, drive_lap, summarize
+    from racing_lib.track import load_track
+
+    track = load_track(args.track)
+    if args.plan:
+        from racing_lib.planning.trajectory import Trajectory
+
+        trajectory = Trajectory.load_csv(args.plan, track=track)
+        _say(f"loaded plan {args.plan} (planned lap {trajectory.lap_time:.2f} s)")
+    else:
+        _say(f"planning {track.name} with method '{args.method}' ...")
+        trajectory = _make_plan(args, track).trajectory
+        _say(f"planned lap time {trajectory.lap_time:.2f} s")
+
+    spec = LapSpec(
+        track=track,
+        trajectory=trajectory,
+        controller=args.controller,
+        smooth_transition=not args.no_smooth_transition,
+        options=_model_options(args),
+    )
+    seeds = [args.seed + i for i in range(args.trials)]
+    out_dir = FilePath(args.out) if args.out else None
+    results = []
+    for seed in seeds:
+        result = drive_lap(spec, seed=seed, progress=not args.json and args.trials == 1)
+        results.append(result)
+        m = result.metrics
+        _say(
+            f"seed {seed}: "
+            + (f"lap {m.lap_time_s:.2f} s" if m.completed else "lap NOT completed")
+            + f", v_x MAE {m.vx_mae_mps:.2f} m/s, e_y MAE {m.ey_mae_m:.2f} m, "
+            f"wall contacts {m.wall_contacts}, controller {m.solve_time_ms_median:.2f} ms median"
+        )
+        if out_dir is not None:
+            result.log.save(str(out_dir / f"log_seed{seed}.npz"))
+    metrics = [r.metrics for r in results]
+    summary = summarize(metrics)
+    report = {
+        "track": track.name,
+        "controller": args.controller,
+        "planned_lap_time_s": float(trajectory.lap_time),
+        "trials": [_trial_fields(m) for m in metrics],
+        "summary": summary,
+    }
+    if out_dir is not None:
+        _save_lap_outputs(out_dir, track, trajectory, results, report)
+        _say(f"figures, logs and summary written to {out_dir}/")
+    if args.json:
+        _emit_json(report)
+    else:
+        _print_summary(report)
+    return 0 if summary["completed"] == len(seeds) else 1
+
+
+def _trial_fields(m) -> dict[str, Any]:
+    d = m.to_dict()
+    d.pop("controller_stats", None)
+    return d
+
+
+def _print_summary(report: dict[str, Any]) -> None:
+    s = report["summary"]
+    print(f"track {report['track']}, controller {report['controller']}")
+    print(f"planned lap time      {report['planned_lap_time_s']:.2f} s")
+    if s["completed"]:
+        print(
+            f"closed-loop lap time  {s['lap_time_mean_s']:.2f} +- {s['lap_time_std_s']:.3f} s "
+            f"(best {s['lap_time_min_s']:.2f} s, "
+            f"{s['completed']}/{len(report['trials'])} completed)"
+        )
+        gap = 100.0 * (s["lap_time_mean_s"] / report["planned_lap_time_s"] - 1.0)
+        print(f"gap to the plan       {gap:+.2f} %")
+    else:
+        print("no lap was completed")
+
+
+def _save_lap_outputs(out_dir: FilePath, track, trajectory, results, report) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from racing_lib import plotting
+    from racing_lib.io import atomic_write_json
+
+    plotting.set_style()
+    out_dir.mkdir(parents=True, exist_ok=True)
+    trajectory.save_csv(str(out_dir / "plan.csv"))
+    log = results[0].log
+    ax = plotting.plot_track(track, {"plan": trajectory, "closed loop": log})
+    ax.figure.savefig(out_dir / "track.png", dpi=130, bbox_inches="tight")
+    plt.close(ax.figure)
+    fig, axes = plt.subplots(2, 1, figsize=(10, 5.5), sharex=True)
+    lap = log.in_lap
+    plotting.plot_profiles(
+        {"plan": trajectory.s, "closed loop": log.s_ref[lap]},
+        {"plan": trajectory.vx, "closed loop": log.vx[lap]},
+        ax=axes[0],
+        ylabel="v_x [m/s]",
+    )
+    plotting.plot_profiles(log.s_ref[lap], {"e_y": log.ey[lap]}, ax=axes[1], ylabel="e_y [m]")
+    fig.savefig(out_dir / "profiles.png", dpi=130, bbox_inches="tight")
+    plt.close(fig)
+    atomic_write_json(out_dir / "summary.json", _clean(report))
+
+
+# --------------------------------------------------------------------------------------------------
+# argument parsing
+
+
+def _add_track(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--track",
+        default=DEFAULT_TRACK,
+        help=f"built-in track name or a track CSV file (default: {DEFAULT_TRACK})",
+    )
+
+
+def _add_model_flags(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--no-drag", action="store_true", help="plan without aerodynamic drag")
+    p.add_argument(
+        "--no-weight-transfer",
+        action="store_true",
+        help="plan without longitudinal weight transfer",
+    )
+    p.add_argument(
+        "--lateral-weight-transfer",
+        action="store_true",
+        help="use the double-track model with lateral weight transfer",
+    )
+
+
+METHODS = ("centerline", "curvature", "time-optimal")
+CONTROLLERS = ("nominal", "coupled-mpc", "decoupled-mpc")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of ``racing-lib`` (exposed for the docs and the tests)."""
+    parser = argparse.ArgumentParser(
+        prog="racing-lib",
+        description="Model-based planning and control for time-trial racing (racing-lab course).",
+    )
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    p = sub.add_parser("tracks", help="list the built-in tracks")
+    p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
+    p.set_defaults(func=cmd_tracks)
+
+    p = sub.add_parser("plan", help="plan a lap of a track")
+    _add_track(p)
+    p.add_argument("--method", choices=METHODS, default="time-optimal")
+    _add_model_flags(p)
+    p.add_argument("--out", help="write the plan to this CSV file")
+    p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
+    p.set_defaults(func=cmd_plan)
+
+    p = sub.add_parser("lap", help="drive laps in closed loop (no arguments: the main job)")
+    _add_track(p)
+    group = p.add_mutually_exclusive_group()
+    group.add_argument("--plan", help="a plan CSV made by 'racing-lib plan --out'")
+    group.add_argument("--method", choices=METHODS, default="time-optimal")
+    _add_model_flags(p)
+    p.add_argument("--controller", choices=CONTROLLERS, default="coupled-mpc")
+    p.add_argument(
+        "--no-smooth-transition",
+        action="store_true",
+        help="MPC ablation: linearize along the reference itself",
+    )
+    p.add_argument("--trials", type=int, default=1, help="number of seeded trials (default 1)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the first trial (default 0)")
+    p.add_argument("--out", help="folder for figures, logs, the plan and summary.json")
+    p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
+    p.set_defaults(func=cmd_lap)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``racing-lib`` console script."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if getattr(args, "trials", 1) < 1:
+        parser.error("--trials must be at least 1")
+    try:
+        return int(args.func(args))
+    except RacingLibError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(
+            "interrupted: files already written are complete (writes are atomic)", file=sys.stderr
+        )
+        return 130
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,180 @@
+"""Trajectory planning (taught in notebook 03): speed profiles, the curvature QP and the
+time-optimal NLP.
+
+Every planner returns a :class:`Trajectory`; :func:`plan` is the one entry point the command line
+uses.
+
+Examples
+--------
+>>> from racing_lib.track import load_track
+>>> from racing_lib.planning import plan
+>>> result = plan(load_track("expressway"), method="centerline")
+>>> result.trajectory.method
+'centerline'
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+from racing_lib.errors import PlanningError
+from racing_lib.planning.curvature import (
+    CurvatureResult,
+    CurvatureSettings,
+    TrackGrid,
+    solve_curvature,
+)
+from racing_lib.planning.speed import SpeedProfile, speed_profile
+from racing_lib.planning.time_optimal import (
+    TimeOptimalResult,
+    TimeOptimalSettings,
+    solve_time_optimal,
+)
+from racing_lib.planning.trajectory import Trajectory
+
+METHODS = ("centerline", "curvature", "time-optimal")
+
+
+@dataclass
+class PlanResult:
+    """What :func:`plan` returns: the trajectory and how it was found.
+
+    Attributes
+    ----------
+    trajectory : Trajectory
+        The plan.
+    method : str
+        ``'centerline'``, ``'curvature'`` or ``'time-optimal'``.
+    success : bool
+        The planner converged.
+    status : str
+        The solver's status ('ok' for the centerline).
+    iterations : int
+        QPs (curvature) or IPOPT iterations (time-optimal; 0 for the centerline).
+    solve_time : float
+        Wall time of the planning, s.
+    details : object
+        The planner's own result (:class:`CurvatureResult`, :class:`TimeOptimalResult`) or None.
+    """
+
+    trajectory: Trajectory
+    method: str
+    success: bool
+    status: str
+    iterations: int
+    solve_time: float
+    details: Any = field(default=None, repr=False)
+
+    @property
+    def lap_time(self) -> float:
+        """Planned lap time, s."""
+        return self.trajectory.lap_time
+
+    def summary(self, track: Any = None) -> dict[str, Any]:
+        """The fields of ``racing-lib plan --json``."""
+        traj = self.trajectory
+        return {
+            "track": traj.track_name or getattr(track, "name", ""),
+            "method": self.method,
+            "length_m": float(getattr(track, "length", traj.length)),
+            "nodes": traj.n,
+            "lap_time_s": float(traj.lap_time),
+            "solve_time_s": float(self.solve_time),
+            "iterations": int(self.iterations),
+            "status": self.status,
+        }
+
+
+def plan(
+    track: Any,
+    method: str = "time-optimal",
+    params: Any = None,
+    options: Any = None,
+    *,
+    spacing: float = 3.0,
+    start: str = "warm",
+    curvature_settings: CurvatureSettings | None = None,
+    time_optimal_settings: TimeOptimalSettings | None = None,
+) -> PlanResult:
+    """Plan a flying lap of ``track`` with one of the three methods.
+
+    Parameters
+    ----------
+    track : Track
+        The track.
+    method : {'centerline', 'curvature', 'time-optimal'}
+        ``centerline``: the centerline at its speed profile; ``curvature``: the iterated
+        curvature-optimal QP; ``time-optimal``: the NLP warm-started from the QP (two-stage
+        planner).
+    params : ModelParams, optional
+        Planning model parameters (default ``ModelParams()``).
+    options : ModelOptions, optional
+        Model effects (default ``ModelOptions()``).
+    spacing : float
+        Node spacing along the centerline, m (overrides the settings' spacing).
+    start : {'warm', 'cold'}
+        Start of the time-optimal NLP.
+    curvature_settings, time_optimal_settings : optional
+        Planner settings.
+
+    Returns
+    -------
+    PlanResult
+
+    Raises
+    ------
+    PlanningError
+        Unknown method, or a planner that fails (the message names the solver and its status).
+    """
+    import dataclasses
+
+    t0 = time.perf_counter()
+    key = str(method).strip().lower().replace("_", "-")
+    if key in ("time-optimal", "timeoptimal", "nlp", "min-time"):
+        key = "time-optimal"
+    if key not in METHODS:
+        raise PlanningError(f"unknown planning method {method!r}; use one of {', '.join(METHODS)}.")
+    if key == "centerline":
+        traj = Trajectory.from_centerline(track, params, options=options, spacing=spacing)
+        return PlanResult(traj, key, True, "ok", 0, time.perf_counter() - t0)
+    cs = dataclasses.replace(curvature_settings or CurvatureSettings(), spacing=spacing)
+    if key == "curvature":
+        res = solve_curvature(track, params, options, cs)
+        return PlanResult(
+            res.trajectory, key, res.success, res.status, res.iterations, res.solve_time, res
+        )
+    ts = dataclasses.replace(time_optimal_settings or TimeOptimalSettings(), spacing=spacing)
+    res = solve_time_optimal(track, params, options, ts, start=start, curvature_settings=cs)
+    if res.trajectory is None:
+        raise PlanningError(
+            f"time-optimal NLP: IPOPT returned '{res.status}' and no usable trajectory; warm start "
+            "from the curvature plan or increase max_iter."
+        )
+    return PlanResult(
+        res.trajectory,
+        key,
+        res.success,
+        res.status,
+        res.iterations,
+        time.perf_counter() - t0,
+        res,
+    )
+
+
+__all__ = [
+    "METHODS",
+    "CurvatureResult",
+    "CurvatureSettings",
+    "PlanResult",
+    "SpeedProfile",
+    "TimeOptimalResult",
+    "TimeOptimalSettings",
+    "TrackGrid",
+    "Trajectory",
+    "plan",
+    "solve_curvature",
+    "solve_time_optimal",
+    "speed_profile",
+]

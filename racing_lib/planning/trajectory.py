@@ -1,0 +1,489 @@
+"""Plans as :class:`Trajectory` objects, and the plan CSV file (taught in notebook 03).
+
+A trajectory is what every planner returns and what every controller follows: the line (x, y,
+heading, curvature), the states along it (v_x, v_y, yaw rate r), the inputs (a_x, delta) and the
+time t, all sampled at the same nodes, plus where it came from (track, method, model options).
+``trajectory.path`` is the line itself as a :class:`racing_lib.track.Path`, so a controller can use
+it as its Frenet reference.
+
+The arc length ``s`` of a trajectory is measured along its own line (the raceline), not along the
+track centerline the planners work on, so ``trajectory.path`` and ``trajectory.s`` agree.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import io
+import json
+import math
+import os
+from dataclasses import dataclass, field
+from functools import cached_property
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from racing_lib.errors import PlanningError, RacingLibError
+from racing_lib.io import atomic_write_text
+from racing_lib.planning.speed import speed_profile
+
+#: Version of the plan CSV format written by :meth:`Trajectory.save_csv`.
+PLAN_FORMAT_VERSION = 1
+
+#: The columns of a plan CSV, in order (units in the names).
+PLAN_COLUMNS = (
+    "s_m",
+    "x_m",
+    "y_m",
+    "psi_rad",
+    "kappa_radpm",
+    "vx_mps",
+    "vy_mps",
+    "r_radps",
+    "ax_mps2",
+    "delta_rad",
+    "t_s",
+)
+_FIELDS = ("s", "x", "y", "psi", "kappa", "vx", "vy", "r", "ax", "delta", "t")
+
+
+def options_to_dict(options: Any) -> dict[str, Any]:
+    """Model options as a plain dict (for metadata and JSON); ``None`` -> empty dict."""
+    if options is None:
+        return {}
+    if isinstance(options, dict):
+        return dict(options)
+    if dataclasses.is_dataclass(options):
+        return dataclasses.asdict(options)
+    return {k: v for k, v in vars(options).items() if not k.startswith("_")}
+
+
+@dataclass(frozen=True)
+class TrajectoryState:
+    """States of a trajectory at given arc lengths (arrays, or floats for a scalar query).
+
+    Attributes have the meaning and units of the :class:`Trajectory` fields of the same name.
+    """
+
+    s: Any
+    x: Any
+    y: Any
+    psi: Any
+    kappa: Any
+    vx: Any
+    vy: Any
+    r: Any
+    ax: Any
+    delta: Any
+    t: Any
+
+
+@dataclass(frozen=True, eq=False)
+class Trajectory:
+    """A planned trajectory: line, states and inputs at N nodes of a closed lap.
+
+    Attributes
+    ----------
+    s : ndarray, shape (N,)
+        Arc length along the trajectory's own line, starting at 0, m.
+    x, y : ndarray, shape (N,)
+        Position of the centre of gravity, m.
+    psi : ndarray, shape (N,)
+        Heading of the line (unwrapped), rad.
+    kappa : ndarray, shape (N,)
+        Curvature of the line, 1/m (> 0 turning left).
+    vx, vy : ndarray, shape (N,)
+        Longitudinal and lateral velocity in the body frame, m/s.
+    r : ndarray, shape (N,)
+        Yaw rate, rad/s.
+    ax : ndarray, shape (N,)
+        Longitudinal tire acceleration input a_x, m/s^2.
+    delta : ndarray, shape (N,)
+        Steering angle, rad.
+    t : ndarray, shape (N,)
+        Time at the nodes, starting at 0, s.
+    track_name : str
+        Name of the track planned on.
+    track_checksum : str
+        ``Track.checksum()`` of that track (plans are refused on another track).
+    method : str
+        ``'centerline'``, ``'curvature'`` or ``'time-optimal'``.
+    model_options : dict
+        The model options planned with (drag, weight transfer switches).
+    planned_lap_time : float
+        Lap time of the plan, s (includes the interval from the last node back to the first).
+    info : dict
+        Free-form extras (solver statistics); not written to the CSV.
+    """
+
+    s: np.ndarray
+    x: np.ndarray
+    y: np.ndarray
+    psi: np.ndarray
+    kappa: np.ndarray
+    vx: np.ndarray
+    vy: np.ndarray
+    r: np.ndarray
+    ax: np.ndarray
+    delta: np.ndarray
+    t: np.ndarray
+    track_name: str = ""
+    track_checksum: str = ""
+    method: str = ""
+    model_options: dict[str, Any] = field(default_factory=dict)
+    planned_lap_time: float = float("nan")
+    info: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        n = None
+        for name in _FIELDS:
+            arr = np.asarray(getattr(self, name), dtype=float).ravel()
+            object.__setattr__(self, name, arr)
+            if n is None:
+                n = arr.size
+            if arr.size != n:
+                raise PlanningError(
+                    f"Trajectory field {name!r} has {arr.size} values, expected {n} like 's'; "
+                    "every field needs one value per node."
+                )
+            if not np.all(np.isfinite(arr)):
+                raise PlanningError(
+                    f"Trajectory field {name!r} contains NaN or infinite values; the planner "
+                    "produced an unusable plan, re-plan with another method."
+                )
+        if n is None or n < 4:
+            raise PlanningError("a Trajectory needs at least 4 nodes; plan on a finer grid.")
+        if np.any(np.diff(self.s) <= 0):
+            raise PlanningError("Trajectory s must be strictly increasing; resample the plan.")
+        if not math.isfinite(self.planned_lap_time):
+            # Close the lap with the last interval at the mean speed of its ends.
+            gap = self.length - self.s[-1]
+            v_end = 0.5 * (
+                math.hypot(self.vx[-1], self.vy[-1]) + math.hypot(self.vx[0], self.vy[0])
+            )
+            object.__setattr__(self, "planned_lap_time", float(self.t[-1] + gap / v_end))
+
+    # ------------------------------------------------------------------ geometry
+    @cached_property
+    def path(self):
+        """The line as a closed :class:`racing_lib.track.Path` (built from x, y)."""
+        from racing_lib.track import Path
+
+        try:
+            return Path(self.x, self.y)
+        except RacingLibError as exc:
+            raise PlanningError(
+                f"the planned line cannot be made into a Path ({exc}); re-plan with a finer grid "
+                "or another method."
+            ) from exc
+
+    @property
+    def length(self) -> float:
+        """Length of the line, m (``path.length``; the closing chord is included)."""
+        if "path" in self.__dict__ or self.s.size == 0:
+            return float(self.path.length)
+        chord = math.hypot(self.x[0] - self.x[-1], self.y[0] - self.y[-1])
+        return float(self.s[-1] + chord)
+
+    @property
+    def lap_time(self) -> float:
+        """Planned lap time, s."""
+        return float(self.planned_lap_time)
+
+    @property
+    def n(self) -> int:
+        """Number of nodes."""
+        return int(self.s.size)
+
+    def interpolate(self, s: ArrayLike) -> TrajectoryState:
+        """States at arc lengths ``s`` (m, along the line, wrapped modulo the length).
+
+        Linear interpolation between nodes; heading is interpolated unwrapped; time is continued
+        into the next lap (t + lap time) so that it keeps increasing with s.
+        """
+        length = self.length
+        s_arr = np.asarray(s, dtype=float)
+        scalar = s_arr.ndim == 0
+        sq = np.mod(np.atleast_1d(s_arr), length)
+        s_ext = np.append(self.s, length)
+        out: dict[str, Any] = {"s": sq}
+        for name in _FIELDS[1:]:
+            vals = getattr(self, name)
+            if name == "t":
+                end = self.planned_lap_time
+            elif name == "psi":
+                end = self.psi[0] + 2.0 * math.pi * round(
+                    (self.psi[-1] - self.psi[0]) / (2 * math.pi)
+                )
+            else:
+                end = vals[0]
+            out[name] = np.interp(sq, s_ext, np.append(vals, end))
+        if scalar:
+            out = {k: float(v[0]) for k, v in out.items()}
+        return TrajectoryState(**out)
+
+    def speed(self, s: ArrayLike) -> np.ndarray:
+        """Planned v_x at arc length ``s`` (m), for controllers that want a speed function."""
+        return self.interpolate(s).vx
+
+    # ------------------------------------------------------------------ files
+    def metadata(self) -> dict[str, Any]:
+        """The metadata written in a plan file's header."""
+        return {
+            "format_version": PLAN_FORMAT_VERSION,
+            "track": self.track_name,
+            "track_checksum": self.track_checksum,
+            "method": self.method,
+            "model_options": json.dumps(self.model_options, sort_keys=True),
+            "planned_lap_time_s": f"{self.planned_lap_time:.6f}",
+            "nodes": self.n,
+        }
+
+    def save_csv(self, path: str | os.PathLike[str]) -> None:
+        """Write the plan CSV atomically (temporary file, then rename).
+
+        Format: ``#`` metadata lines (``# key: value``: format version, track name and checksum,
+        method, model options as JSON, planned lap time), then the header
+        ``s_m,x_m,y_m,psi_rad,kappa_radpm,vx_mps,vy_mps,r_radps,ax_mps2,delta_rad,t_s`` and one row
+        per node.
+        """
+        buf = io.StringIO()
+        buf.write("# racing_lib plan\n")
+        for key, value in self.metadata().items():
+            buf.write(f"# {key}: {value}\n")
+        buf.write(",".join(PLAN_COLUMNS) + "\n")
+        data = np.column_stack([getattr(self, name) for name in _FIELDS])
+        np.savetxt(buf, data, delimiter=",", fmt="%.9g")
+        atomic_write_text(path, buf.getvalue())
+
+    @classmethod
+    def load_csv(cls, path: str | os.PathLike[str], track: Any = None) -> Trajectory:
+        """Read a plan CSV written by :meth:`save_csv`.
+
+        Parameters
+        ----------
+        path : path-like
+            The plan file.
+        track : Track, optional
+            If given, the plan must have been made for this track (same checksum); otherwise a
+            :class:`PlanningError` names both tracks.
+        """
+        try:
+            with open(path, encoding="utf-8") as fh:
+                text = fh.read()
+        except OSError as exc:
+            raise PlanningError(f"cannot read plan file {os.fspath(path)!r}: {exc}") from exc
+        meta: dict[str, str] = {}
+        lines = text.splitlines()
+        body_start = 0
+        for i, line in enumerate(lines):
+            if line.startswith("#"):
+                key, sep, value = line[1:].partition(":")
+                if sep:
+                    meta[key.strip()] = value.strip()
+                continue
+            body_start = i
+            break
+        header = lines[body_start].strip().split(",") if lines[body_start:] else []
+        if tuple(h.strip() for h in header) != PLAN_COLUMNS:
+            raise PlanningError(
+                f"{os.fspath(path)!r} is not a racing_lib plan CSV: expected the header "
+                f"{','.join(PLAN_COLUMNS)}; make one with `racing-lib plan --out PLAN.csv`."
+            )
+        version = int(meta.get("format_version", "0") or 0)
+        if version > PLAN_FORMAT_VERSION:
+            raise PlanningError(
+                f"plan file {os.fspath(path)!r} has format version {version}, newer than this "
+                f"racing_lib understands ({PLAN_FORMAT_VERSION}); upgrade racing_lib or re-plan."
+            )
+        try:
+            data = np.loadtxt(
+                io.StringIO("\n".join(lines[body_start + 1 :])), delimiter=",", ndmin=2
+            )
+        except ValueError as exc:
+            raise PlanningError(
+                f"plan file {os.fspath(path)!r} has unreadable rows: {exc}"
+            ) from exc
+        if data.shape[1] != len(PLAN_COLUMNS):
+            raise PlanningError(
+                f"plan file {os.fspath(path)!r} has {data.shape[1]} columns, expected "
+                f"{len(PLAN_COLUMNS)}; re-plan with `racing-lib plan`."
+            )
+        name = meta.get("track", "")
+        checksum = meta.get("track_checksum", "")
+        if track is not None:
+            want = track.checksum()
+            if checksum != want:
+                raise PlanningError(
+                    f"plan {os.fspath(path)!r} was made for track {name!r} (checksum "
+                    f"{checksum[:12] or 'none'}), not for track {track.name!r} (checksum "
+                    f"{want[:12]}); re-plan with `racing-lib plan --track {track.name}`."
+                )
+        try:
+            options = json.loads(meta.get("model_options", "{}") or "{}")
+        except json.JSONDecodeError:
+            options = {}
+        cols = {name_: data[:, i] for i, name_ in enumerate(_FIELDS)}
+        return cls(
+            **cols,
+            track_name=name,
+            track_checksum=checksum,
+            method=meta.get("method", ""),
+            model_options=options,
+            planned_lap_time=float(meta.get("planned_lap_time_s", "nan")),
+        )
+
+    # ------------------------------------------------------------------ builders
+    @classmethod
+    def from_states(
+        cls,
+        x: ArrayLike,
+        y: ArrayLike,
+        vx: ArrayLike,
+        vy: ArrayLike,
+        r: ArrayLike,
+        ax: ArrayLike,
+        delta: ArrayLike,
+        dt: ArrayLike,
+        *,
+        track: Any = None,
+        method: str = "",
+        model_options: Any = None,
+        info: dict[str, Any] | None = None,
+    ) -> Trajectory:
+        """Build a trajectory from positions, states and the time of each interval.
+
+        The line's arc length, heading and curvature come from a Path through (x, y); ``dt[k]`` is
+        the time from node k to node k+1 (the last one closes the lap), s.
+        """
+        from racing_lib.track import Path
+
+        x = np.asarray(x, float)
+        y = np.asarray(y, float)
+        dt = np.asarray(dt, float)
+        if np.any(~np.isfinite(dt)) or np.any(dt <= 0):
+            raise PlanningError(
+                "the plan has non-positive or NaN interval times (the speed is zero or negative "
+                "somewhere); re-plan, e.g. with a warm start from the curvature plan."
+            )
+        try:
+            path = Path(x, y)
+        except RacingLibError as exc:
+            raise PlanningError(
+                f"the planned line cannot be made into a Path ({exc}); re-plan with a finer grid."
+            ) from exc
+        s = _node_arc_length(path, x, y)
+        t = np.concatenate(([0.0], np.cumsum(dt[:-1])))
+        traj = cls(
+            s=s,
+            x=x,
+            y=y,
+            psi=np.unwrap(np.asarray(path.heading(s), float)),
+            kappa=np.asarray(path.curvature(s), float),
+            vx=vx,
+            vy=vy,
+            r=r,
+            ax=ax,
+            delta=delta,
+            t=t,
+            track_name=getattr(track, "name", "") if track is not None else "",
+            track_checksum=track.checksum() if track is not None else "",
+            method=method,
+            model_options=options_to_dict(model_options),
+            planned_lap_time=float(np.sum(dt)),
+            info=dict(info or {}),
+        )
+        object.__setattr__(traj, "path", path)  # reuse the Path just built
+        return traj
+
+    @classmethod
+    def from_centerline(
+        cls,
+        track: Any,
+        params: Any = None,
+        pedal_map: Any = None,
+        options: Any = None,
+        spacing: float = 3.0,
+        v_top: float | None = None,
+    ) -> Trajectory:
+        """The 'centerline' plan: drive the track centerline at its quasi-steady speed profile.
+
+        Parameters
+        ----------
+        track : Track
+            The track.
+        params : ModelParams, optional
+            Planning parameters (default: ``ModelParams()`` if racing_lib.model is available).
+        pedal_map : PedalMap, optional
+            a_x limits (default: ``params.pedal_map`` if present).
+        options : ModelOptions, optional
+            Model options (the drag switch matters here).
+        spacing : float
+            Node spacing along the centerline, m.
+        v_top : float, optional
+            Top speed, m/s.
+        """
+        params, pedal_map, options = default_model_inputs(params, pedal_map, options)
+        line = track.centerline
+        n = max(8, int(round(line.length / spacing)))
+        s = np.asarray(line.sample(n=n), float)
+        kappa = np.asarray(line.curvature(s), float)
+        theta = np.asarray(track.grade(s), float)
+        prof = speed_profile(
+            s, kappa, params, pedal_map, theta, v_top, options, length=float(line.length)
+        )
+        x, y = line.position(s)
+        v = prof.v
+        wheelbase = _param_sum(params, ("l_f", "l_r"), 2.5701)
+        dt = 2.0 * np.diff(np.append(s, line.length)) / (v + np.roll(v, -1))
+        traj = cls.from_states(
+            x,
+            y,
+            vx=v,
+            vy=np.zeros(n),
+            r=v * kappa,
+            ax=prof.a_x,
+            delta=np.arctan(wheelbase * kappa),  # kinematic steering angle of the arc
+            dt=dt,
+            track=track,
+            method="centerline",
+            model_options=options,
+            info={"speed_profile_success": prof.success},
+        )
+        return traj
+
+
+def _param_sum(params: Any, names: tuple[str, ...], default: float) -> float:
+    try:
+        return float(sum(getattr(params, n) for n in names))
+    except (AttributeError, TypeError):
+        return default
+
+
+def default_model_inputs(params: Any, pedal_map: Any, options: Any) -> tuple[Any, Any, Any]:
+    """Fill in defaults from racing_lib.model: ModelParams(), its pedal map, ModelOptions()."""
+    try:
+        from racing_lib import model
+    except ImportError:  # the model module is optional for the centerline plan
+        return params, pedal_map, options
+    if params is None:
+        params = model.ModelParams()
+    if options is None:
+        options = model.ModelOptions()
+    if pedal_map is None:
+        pedal_map = getattr(params, "pedal_map", None)
+    return params, pedal_map, options
+
+
+def _node_arc_length(path: Any, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Arc length of the nodes (x, y) along ``path`` (a Path through them), m, starting at 0."""
+    nodes = getattr(path, "s_nodes", None)
+    if nodes is not None and len(nodes) == len(x):
+        s = np.asarray(nodes, float)
+        return s - s[0]
+    # Chord lengths differ from the spline's arc length by O(ds^3 kappa^2): scale them to its
+    # length.
+    chord = np.hypot(np.diff(np.append(x, x[0])), np.diff(np.append(y, y[0])))
+    s = np.concatenate(([0.0], np.cumsum(chord[:-1])))
+    return s * float(path.length) / float(np.sum(chord))

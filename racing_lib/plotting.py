@@ -1,0 +1,259 @@
+"""The course's figures, one visual language for every chapter.
+
+Every function takes an optional ``ax`` (or ``axes``), draws, and returns what it drew; none calls
+``plt.show()``. Lines are given as anything with ``x`` and ``y`` arrays (a planned
+:class:`~racing_lib.planning.trajectory.Trajectory`, a :class:`~racing_lib.experiment.LapLog`) or as
+an ``(x, y)`` pair.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import matplotlib.pyplot as plt
+import numpy as np
+from matplotlib.axes import Axes
+from matplotlib.figure import Figure
+
+from racing_lib.track import Track
+
+#: Colours of the recurring lines, so that "plan" looks the same in every chapter.
+COLORS: dict[str, str] = {
+    "centerline": "0.55",
+    "boundary": "0.15",
+    "plan": "tab:blue",
+    "closed loop": "tab:orange",
+    "best lap": "tab:green",
+    "curvature-optimal": "tab:purple",
+    "time-optimal": "tab:blue",
+}
+
+
+def set_style() -> None:
+    """The course's matplotlib defaults (sizes readable in a notebook and in the book)."""
+    plt.rcParams.update(
+        {
+            "figure.figsize": (8.0, 4.5),
+            "figure.dpi": 100,
+            "axes.grid": True,
+            "grid.alpha": 0.3,
+            "axes.spines.top": False,
+            "axes.spines.right": False,
+            "legend.frameon": False,
+            "font.size": 10,
+        }
+    )
+
+
+def _xy(line: Any) -> tuple[np.ndarray, np.ndarray]:
+    if isinstance(line, tuple | list) and len(line) == 2:
+        return np.asarray(line[0], dtype=float), np.asarray(line[1], dtype=float)
+    return np.asarray(line.x, dtype=float), np.asarray(line.y, dtype=float)
+
+
+def _color(label: str, index: int) -> str:
+    return COLORS.get(label, f"C{(index + 3) % 10}")
+
+
+def track_edges(track: Track, n: int = 2000) -> tuple[np.ndarray, np.ndarray]:
+    """The left and right track edges as closed polylines.
+
+    Returns
+    -------
+    left, right : ndarray, shape (n + 1, 2)
+        Edge points in m; the first point is repeated at the end to close the loop.
+    """
+    s = np.linspace(0.0, track.length, n, endpoint=False)
+    xl, yl, _ = track.centerline.to_cartesian(s, track.width_left(s))
+    xr, yr, _ = track.centerline.to_cartesian(s, -track.width_right(s))
+    left = np.column_stack([np.append(xl, xl[0]), np.append(yl, yl[0])])
+    right = np.column_stack([np.append(xr, xr[0]), np.append(yr, yr[0])])
+    return left, right
+
+
+def plot_track(
+    track: Track,
+    lines: Mapping[str, Any] | None = None,
+    *,
+    ax: Axes | None = None,
+    centerline: bool = True,
+    corners: Mapping[int, float] | None = None,
+    start_line: bool = True,
+) -> Axes:
+    """Draw a track (edges, centerline, start line) and any lines on it.
+
+    Parameters
+    ----------
+    track : Track
+        The track; walls are drawn solid, open edges dashed.
+    lines : mapping of label -> line, optional
+        Racing lines to draw (objects with ``x``/``y`` or ``(x, y)`` pairs, m).
+    ax : Axes, optional
+        Where to draw; a new figure when omitted.
+    centerline : bool
+        Draw the centerline (thin, grey).
+    corners : mapping of number -> s, optional
+        Mark these corners (arc length on the centerline, m) with circled numbers.
+    start_line : bool
+        Draw the start/finish line at s = 0.
+    """
+    if ax is None:
+        _, ax = plt.subplots(figsize=(7, 7))
+    left, right = track_edges(track)
+    style = "-" if track.boundary == "walls" else "--"
+    for edge in (left, right):
+        ax.plot(edge[:, 0], edge[:, 1], style, color=COLORS["boundary"], lw=1.0)
+    if centerline:
+        cx, cy = track.centerline.position(np.linspace(0, track.length, 2000))
+        ax.plot(cx, cy, ":", color=COLORS["centerline"], lw=0.8, label="centerline")
+    for i, (label, line) in enumerate((lines or {}).items()):
+        x, y = _xy(line)
+        ax.plot(x, y, color=_color(label, i), lw=1.4, label=label)
+    if start_line:
+        x0, y0, _ = track.centerline.to_cartesian(
+            np.array([0.0, 0.0]), np.array([track.width_left(0.0), -track.width_right(0.0)])
+        )
+        ax.plot(x0, y0, color="crimson", lw=2.5, label="start/finish")
+    if corners:
+        for number, s_c in corners.items():
+            xc, yc, _ = track.centerline.to_cartesian(s_c, 2.5 * track.width_left(s_c))
+            ax.annotate(
+                str(number),
+                (float(xc), float(yc)),
+                ha="center",
+                va="center",
+                fontsize=9,
+                bbox={"boxstyle": "circle", "fc": "white", "ec": "0.2"},
+            )
+    ax.set_aspect("equal")
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    ax.legend(loc="best", fontsize=8)
+    return ax
+
+
+def plot_corners(
+    track: Track,
+    corners: Mapping[int, float],
+    lines: Mapping[str, Any] | None = None,
+    *,
+    half_width: float = 90.0,
+    axes: Sequence[Axes] | None = None,
+) -> tuple[Figure, Sequence[Axes]]:
+    """Zoom on corners: one panel per corner, centred on it, with the same lines as the overview.
+
+    Parameters
+    ----------
+    track : Track
+        The track.
+    corners : mapping of number -> s
+        Corner numbers and their arc length on the centerline, m.
+    lines : mapping of label -> line, optional
+        Lines to draw in every panel.
+    half_width : float
+        Half the side of each square panel, m.
+    axes : sequence of Axes, optional
+        One per corner; a new figure with a row-major grid when omitted.
+    """
+    n = len(corners)
+    if axes is None:
+        cols = min(n, 3)
+        rows = int(np.ceil(n / cols))
+        fig, grid = plt.subplots(rows, cols, figsize=(3.6 * cols, 3.6 * rows), squeeze=False)
+        axes = list(grid.ravel())
+        for extra in axes[n:]:
+            extra.set_visible(False)
+    fig = axes[0].figure
+    for ax, (number, s_c) in zip(axes, corners.items(), strict=False):
+        plot_track(track, lines, ax=ax, start_line=False)
+        xc, yc = track.centerline.position(s_c)
+        ax.set_xlim(float(xc) - half_width, float(xc) + half_width)
+        ax.set_ylim(float(yc) - half_width, float(yc) + half_width)
+        ax.set_title(f"corner {number}")
+        ax.set_xlabel("")
+        ax.set_ylabel("")
+        if ax.get_legend() is not None:
+            ax.get_legend().remove()
+    fig.tight_layout()
+    return fig, axes
+
+
+def plot_profiles(
+    s: Mapping[str, np.ndarray] | np.ndarray,
+    values: Mapping[str, np.ndarray],
+    *,
+    ax: Axes | None = None,
+    ylabel: str = "",
+    corners: Mapping[int, float] | None = None,
+) -> Axes:
+    """Quantities over the arc length s (curvature, speed, steering ...).
+
+    Parameters
+    ----------
+    s : array or mapping of label -> array
+        Arc length, m: one array shared by all lines, or one per label.
+    values : mapping of label -> array
+        The lines to draw.
+    ax : Axes, optional
+        Where to draw.
+    ylabel : str
+        Axis label with its unit.
+    corners : mapping of number -> s, optional
+        Mark corners with vertical lines.
+    """
+    if ax is None:
+        _, ax = plt.subplots(figsize=(9, 3))
+    for i, (label, v) in enumerate(values.items()):
+        si = s[label] if isinstance(s, Mapping) else s
+        ax.plot(si, v, color=_color(label, i), lw=1.2, label=label)
+    if corners:
+        for number, s_c in corners.items():
+            ax.axvline(s_c, color="0.7", lw=0.8, zorder=0)
+            ax.annotate(
+                str(number),
+                (s_c, 1.0),
+                xycoords=("data", "axes fraction"),
+                ha="center",
+                va="bottom",
+                fontsize=8,
+            )
+    ax.set_xlabel("s [m]")
+    ax.set_ylabel(ylabel)
+    ax.legend(loc="best", fontsize=8)
+    return ax
+
+
+def plot_gg(
+    a_x: np.ndarray,
+    a_y: np.ndarray,
+    *,
+    mu_g: float | None = None,
+    ax: Axes | None = None,
+    label: str = "",
+) -> Axes:
+    """The g-g diagram: lateral against longitudinal acceleration, m/s^2.
+
+    Parameters
+    ----------
+    a_x, a_y : array
+        Longitudinal and lateral acceleration, m/s^2.
+    mu_g : float, optional
+        Draw the friction circle of this radius, m/s^2.
+    ax : Axes, optional
+        Where to draw.
+    label : str
+        Legend label of the points.
+    """
+    if ax is None:
+        _, ax = plt.subplots(figsize=(4.5, 4.5))
+    ax.plot(a_y, a_x, ".", ms=2, alpha=0.6, label=label or None)
+    if mu_g is not None:
+        phi = np.linspace(0, 2 * np.pi, 200)
+        ax.plot(mu_g * np.cos(phi), mu_g * np.sin(phi), "k--", lw=0.8, label="friction circle")
+    ax.set_xlabel("a_y [m/s$^2$]")
+    ax.set_ylabel("a_x [m/s$^2$]")
+    ax.set_aspect("equal")
+    if label or mu_g is not None:
+        ax.legend(loc="best", fontsize=8)
+    return ax

@@ -1,0 +1,678 @@
+"""The simulated car: the stand-in for Gran Turismo Sport, behind the `Plant` protocol.
+
+A higher-fidelity plant than the planning model (`racing_lib.model`), so that model mismatch,
+identification and the paper's ablations mean something:
+
+* inputs at 10 Hz: a steering command (angle- and rate-limited, first-order actuator lag) and one
+  pedal u_p in [-1, 1] (throttle >= 0, brake < 0); outputs only spatial states (`Observation`);
+* a double-track chassis: four wheel loads with longitudinal and lateral load transfer, Pacejka
+  lateral forces with tire load sensitivity and combined slip (friction ellipse), aerodynamic drag,
+  rolling resistance and road grade from the track's elevation;
+* a nonlinear rear-wheel-drive powertrain (engine torque curve, power limit, six gears with
+  automatic shifting and a torque cut while shifting) and brakes with a front/rear split, every
+  longitudinal tire force limited by the tire's friction;
+* walls on walled tracks (contact stops the motion into the wall, costs speed, and is counted with
+  its duration); on open tracks the wheels beyond the edge lose grip;
+* fixed-step RK4 inside each control step; seeded per-trial randomness (actuation noise and a small
+  friction variation), bit-for-bit reproducible per seed.
+
+The smooth part of the physics is one function, `car_vector_field`, that runs on floats (the fast
+path, the `math` module) and on CasADi symbols, so a planner can optimize a lap with the simulated
+car's own equations. The discrete parts (gear choice, walls, edge friction) stay in `SimulatedCar`.
+Every parameter lives in `racing_lib.vehicle.VehicleParams`.
+
+Taught in notebook 02 (the simulated car and its logs).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from enum import IntEnum
+from typing import Any, Protocol, runtime_checkable
+
+import numpy as np
+
+from racing_lib.errors import ControlError, PlantError
+from racing_lib.track import FrenetTracker, Track
+from racing_lib.vehicle import (
+    MATH_OPS,
+    VehicleParams,
+    axle_cornering_stiffness,
+    drive_force,
+    gear_rpm,
+    static_axle_loads,
+    wheel_loads,
+)
+
+__all__ = [
+    "Observation",
+    "Plant",
+    "SimState",
+    "SimulatedCar",
+    "car_vector_field",
+]
+
+_TWO_PI = 2.0 * math.pi
+
+
+@dataclass(frozen=True, slots=True)
+class Observation:
+    """What the car reports after each control step: spatial states only (as the paper's GTS API).
+
+    Attributes
+    ----------
+    t : time since reset, s.
+    x, y : position of the centre of gravity, m.
+    psi : yaw angle, rad (continuous, not wrapped).
+    vx, vy : velocity in the body frame (forward, left), m/s.
+    r : yaw rate, rad/s (counter-clockwise positive).
+    """
+
+    t: float
+    x: float
+    y: float
+    psi: float
+    vx: float
+    vy: float
+    r: float
+
+
+@runtime_checkable
+class Plant(Protocol):
+    """Anything the lap runner can drive: the simulated car or another simulator.
+
+    Attributes
+    ----------
+    dt : control period, s.
+    """
+
+    dt: float
+
+    def reset(self, seed: int | None = None) -> Observation:
+        """Start a new trial (seeded randomness) and return the first observation."""
+        ...
+
+    def step(self, steer_rad: float, pedal: float) -> Observation:
+        """Apply (steering angle command, rad; pedal in [-1, 1]) for one period dt."""
+        ...
+
+
+class SimState(IntEnum):
+    """Indices of the simulator's continuous state."""
+
+    X = 0  #: position x, m
+    Y = 1  #: position y, m
+    PSI = 2  #: yaw angle, rad
+    VX = 3  #: longitudinal velocity (body frame), m/s
+    VY = 4  #: lateral velocity (body frame, left positive), m/s
+    R = 5  #: yaw rate, rad/s
+    DELTA = 6  #: actual road-wheel steering angle, rad
+
+
+N_STATE = len(SimState)
+# Plain-int copies of the indices for the hot path (IntEnum lookups cost time there).
+_PSI, _VX, _VY, _R, _DELTA = (int(SimState[n]) for n in ("PSI", "VX", "VY", "R", "DELTA"))
+
+
+def car_vector_field(
+    state: Any,
+    delta_cmd: Any,
+    f_drive: Any,
+    f_brake: Any,
+    theta: Any,
+    mu_wheels: tuple[Any, Any, Any, Any],
+    a_transfer: tuple[Any, Any],
+    p: VehicleParams,
+    ops: Any = MATH_OPS,
+) -> tuple[tuple[Any, ...], tuple[Any, Any]]:
+    """Continuous-time dynamics of the simulated car (the smooth part).
+
+    Works with floats (``ops=MATH_OPS``, the simulator's fast path) and with CasADi symbols
+    (``ops=CASADI_OPS``); min/max are the only non-smooth operations.
+
+    Parameters
+    ----------
+    state : sequence of 7
+        [x, y, psi, v_x, v_y, r, delta] (see `SimState`), m, m, rad, m/s, m/s, rad/s, rad.
+    delta_cmd : steering command after the angle limit, rad.
+    f_drive : total drive force the powertrain delivers to the rear wheels (before the tire
+        limit), N, >= 0.
+    f_brake : total brake force (before the split and the tire limit), N, >= 0.
+    theta : road pitch, rad (positive uphill).
+    mu_wheels : friction coefficients of the wheels (FL, FR, RL, RR), -.
+    a_transfer : (a_x, a_y), the accelerations that set the load transfer, m/s^2. The wheel loads
+        depend on the tire forces, which depend on the loads (an algebraic loop). The simulator
+        closes it quasi-statically with the ground-force accelerations of the previous substep
+        (returned here as the second output); a planner can make them decision variables with the
+        constraint a_transfer == returned accelerations.
+    p : vehicle parameters.
+    ops : math backend (`racing_lib.vehicle.MATH_OPS` or `CASADI_OPS`).
+
+    Returns
+    -------
+    d_state : tuple of 7
+        Time derivative of the state.
+    a_ground : (a_x, a_y)
+        Accelerations of the ground forces on the tires (drive, brake, rolling, lateral), body
+        frame, m/s^2: the load-transfer input for the next substep.
+    """
+    psi, vx, vy, r, delta = state[_PSI], state[_VX], state[_VY], state[_R], state[_DELTA]
+    sin, cos, atan, fmin, fmax = ops.sin, ops.cos, ops.atan, ops.fmin, ops.fmax
+    m = p.m
+    sd, cd = sin(delta), cos(delta)
+
+    # Vertical loads (double track, longitudinal + lateral transfer, paper Eq. 11-13).
+    fz_fl, fz_fr, fz_rl, fz_rr = wheel_loads(p, a_transfer[0], a_transfer[1], theta, ops)
+
+    # Slip angles; the speed in the denominator is clamped so the dynamics stay bounded near
+    # standstill (the car is not meant to reverse).
+    vx_s = fmax(ops.fabs(vx), p.v_min_slip)
+    alpha_f = delta - atan((vy + p.l_f * r) / vx_s)
+    alpha_r = -atan((vy - p.l_r * r) / vx_s)
+
+    # Smooth sign of the motion: brakes and rolling resistance fade out at standstill.
+    sgn = ops.tanh(vx / p.v_smooth)
+    fb_f = -0.5 * p.brake_front_share * f_brake * sgn  # per front wheel, N
+    fb_r = -0.5 * (1.0 - p.brake_front_share) * f_brake * sgn  # per rear wheel, N
+    fx_r_cmd = 0.5 * f_drive + fb_r  # rear-wheel drive, equal split (ideal differential)
+
+    fz0 = p.F_z0
+    k_load = p.load_sensitivity
+    q = p.stiffness_load_exponent
+    min_share2 = p.min_lateral_share * p.min_lateral_share
+    tcs_floor2 = 1.0 if p.tcs_floor >= 1.0 else p.tcs_floor * p.tcs_floor
+    w_half = 0.5 * m * p.g / (p.l_f + p.l_r)
+    fzs_f, fzs_r = w_half * p.l_r, w_half * p.l_f  # static wheel loads on flat ground, N
+
+    def wheel(
+        fz: Any, fz_static: float, mu: Any, b: float, c: float, d: float, alpha: Any, fx_cmd: Any
+    ) -> tuple[Any, Any]:
+        # Peak force with load sensitivity; stiffness B grows less than the load (exponent q, B
+        # is the value at the static load); then the friction ellipse: the longitudinal force is
+        # limited by the peak and the lateral force gets what is left of the ellipse.
+        f_peak = mu * fz * d * (1.0 - k_load * (fz - fz0) / fz0)
+        b_eff = b * (fz_static / fmax(fz, 1.0)) ** q
+        shape = sin(c * atan(b_eff * alpha))  # lateral use of the peak, pure slip
+        # Traction control: drive force only up to what the lateral use leaves of the circle.
+        f_drive_max = f_peak * ops.sqrt(fmax(1.0 - shape * shape, tcs_floor2))
+        fx = fmin(fmax(fx_cmd, -f_peak), fmin(f_peak, f_drive_max))
+        share = ops.sqrt(fmax(1.0 - fx * fx / (f_peak * f_peak + 1.0), min_share2))
+        return fx, f_peak * shape * share
+
+    fx_fl, fy_fl = wheel(fz_fl, fzs_f, mu_wheels[0], p.B_f, p.C_f, p.D_f, alpha_f, fb_f)
+    fx_fr, fy_fr = wheel(fz_fr, fzs_f, mu_wheels[1], p.B_f, p.C_f, p.D_f, alpha_f, fb_f)
+    fx_rl, fy_rl = wheel(fz_rl, fzs_r, mu_wheels[2], p.B_r, p.C_r, p.D_r, alpha_r, fx_r_cmd)
+    fx_rr, fy_rr = wheel(fz_rr, fzs_r, mu_wheels[3], p.B_r, p.C_r, p.D_r, alpha_r, fx_r_cmd)
+
+    # Front wheel forces rotated by the steering angle into the body frame.
+    fxb_fl, fyb_fl = fx_fl * cd - fy_fl * sd, fx_fl * sd + fy_fl * cd
+    fxb_fr, fyb_fr = fx_fr * cd - fy_fr * sd, fx_fr * sd + fy_fr * cd
+    rolling = p.c_rr * (fz_fl + fz_fr + fz_rl + fz_rr) * sgn
+    f_x = fxb_fl + fxb_fr + fx_rl + fx_rr - rolling
+    f_y = fyb_fl + fyb_fr + fy_rl + fy_rr
+    half_t = 0.5 * p.l_t
+    m_z = (
+        p.l_f * (fyb_fl + fyb_fr)
+        - p.l_r * (fy_rl + fy_rr)
+        + half_t * (fxb_fr - fxb_fl + fx_rr - fx_rl)  # left wheels sit at y = +l_t/2
+    )
+    drag = p.C_xw * vx * ops.fabs(vx)
+
+    d_vx = (f_x - drag) / m - p.g * sin(theta) + r * vy
+    d_vy = f_y / m - r * vx
+    d_r = m_z / p.I_zz
+    sp, cp = sin(psi), cos(psi)
+    d_x = vx * cp - vy * sp
+    d_y = vx * sp + vy * cp
+    # Steering actuator: first-order lag, rate-limited.
+    d_delta = fmin(fmax((delta_cmd - delta) / p.steer_tau, -p.steer_rate_max), p.steer_rate_max)
+    return (d_x, d_y, r, d_vx, d_vy, d_r, d_delta), (f_x / m, f_y / m)
+
+
+class SimulatedCar:
+    """The simulated race car on a track (implements `Plant`).
+
+    Parameters
+    ----------
+    track : Track
+        The track: its centerline gives the Frenet position for walls / edges, its widths the edges,
+        its elevation the road grade, its ``boundary`` the edge behaviour ('walls' or 'open').
+    params : VehicleParams
+        The car's true parameters.
+    dt : float
+        Control period, s (inputs are held for dt).
+    start_s : float
+        Arc length of the start on the centerline, m.
+    start_speed : float
+        Initial forward speed (flying start), m/s.
+    substep : float
+        Nominal RK4 step, s; dt is split into equal substeps no longer than this. At low speed the
+        substep shrinks further (the tire dynamics stiffen like 1/v_x), so RK4 stays stable.
+
+    Attributes
+    ----------
+    wall_contacts : int
+        Number of wall contact episodes since reset (a car scraping along a wall counts once).
+    wall_contact_time : float
+        Time spent touching a wall, s.
+    offtrack_time : float
+        Time with at least one wheel beyond the track edge (open tracks), s.
+
+    Notes
+    -----
+    ``reset(seed=None)`` gives the nominal car (no noise, nominal friction); ``reset(seed)`` draws
+    the trial's friction variation and its actuation noise from ``numpy.random.default_rng(seed)``.
+    """
+
+    def __init__(
+        self,
+        track: Track,
+        params: VehicleParams | None = None,
+        dt: float = 0.1,
+        start_s: float = 0.0,
+        start_speed: float = 20.0,
+        substep: float = 0.025,
+    ) -> None:
+        p = params if params is not None else VehicleParams()
+        for name, value in (("dt", dt), ("substep", substep)):
+            if not (math.isfinite(value) and value > 0.0):
+                raise PlantError(f"SimulatedCar {name} must be a positive number of seconds.")
+        if not (math.isfinite(start_s) and math.isfinite(start_speed) and start_speed >= 0.0):
+            raise PlantError("SimulatedCar start_s must be finite and start_speed >= 0 m/s.")
+        self.track = track
+        self.params = p
+        self.dt = float(dt)
+        self.start_s = float(start_s)
+        self.start_speed = float(start_speed)
+        self._n_base = max(1, math.ceil(self.dt / substep - 1e-9))
+        # Stiffest tire mode ~ (sum of cornering stiffnesses) (1/m + l^2/I) / v_x; RK4 is stable
+        # for |lambda h| < 2.8, we keep it below 2.
+        f_zf, f_zr = static_axle_loads(p.m, p.l_f, p.l_r, p.g)
+        c_sum = axle_cornering_stiffness(f_zf, p.mu, p.B_f, p.C_f, p.D_f)
+        c_sum += axle_cornering_stiffness(f_zr, p.mu, p.B_r, p.C_r, p.D_r)
+        self._stiffness = c_sum * (1.0 / p.m + max(p.l_f, p.l_r) ** 2 / p.I_zz)
+        self._walls = track.boundary == "walls"
+        self._tracker = FrenetTracker(track.centerline)
+        self._build_tables()
+        # Extents used by the edge checks: body corners (walls) and wheels (open tracks).
+        self._body_front = p.l_f + p.overhang_front
+        self._body_rear = -(p.l_r + p.overhang_rear)
+        self._wheels_xy = ((p.l_f, 0.5 * p.l_t), (p.l_f, -0.5 * p.l_t),
+                           (-p.l_r, 0.5 * p.l_t), (-p.l_r, -0.5 * p.l_t))  # fmt: skip
+        self.reset()
+
+    # ------------------------------------------------------------------ track tables
+    def _build_tables(self) -> None:
+        """Heading, widths and grade on a ~1 m grid, as Python lists for scalar lookups."""
+        tr = self.track
+        length = tr.length
+        n = max(16, math.ceil(length / 1.0))
+        ds = length / n
+        s = np.arange(n + 1) * ds
+        s[-1] = 0.0  # closure: the last entry repeats s = 0
+        heading = np.unwrap(np.asarray(tr.centerline.heading(s), dtype=float))
+        self._ds = ds
+        self._n_tab = n
+        self._length = length
+        self._tab_heading = heading.tolist()
+        self._tab_wl = np.asarray(tr.width_left(s), dtype=float).tolist()
+        self._tab_wr = np.asarray(tr.width_right(s), dtype=float).tolist()
+        self._tab_grade = np.asarray(tr.grade(s), dtype=float).tolist()
+
+    def _lookup(self, s: float) -> tuple[float, float, float, float]:
+        """(heading, width_left, width_right, grade) at s by linear interpolation."""
+        u = (s % self._length) / self._ds
+        i = int(u)
+        if i >= self._n_tab:
+            i = self._n_tab - 1
+        w = u - i
+        h, wl, wr, gr = self._tab_heading, self._tab_wl, self._tab_wr, self._tab_grade
+        return (
+            h[i] + w * (h[i + 1] - h[i]),
+            wl[i] + w * (wl[i + 1] - wl[i]),
+            wr[i] + w * (wr[i + 1] - wr[i]),
+            gr[i] + w * (gr[i + 1] - gr[i]),
+        )
+
+    # ------------------------------------------------------------------ Plant API
+    def reset(self, seed: int | None = None) -> Observation:
+        """Place the car at ``start_s`` on the centerline, heading along it, at ``start_speed``.
+
+        Parameters
+        ----------
+        seed : int or None
+            Seed of the trial's randomness (friction variation, actuation noise). None: the
+            nominal car, without randomness.
+        """
+        p = self.params
+        self._seed = seed
+        if seed is None:
+            self._rng = None
+            self._mu = p.mu
+        else:
+            self._rng = np.random.default_rng(seed)
+            self._mu = p.mu * (1.0 + p.mu_variation_std * float(self._rng.standard_normal()))
+        path = self.track.centerline
+        x0, y0 = path.position(self.start_s)
+        psi0 = float(np.asarray(path.heading(self.start_s)))
+        self._state = [float(x0), float(y0), psi0, self.start_speed, 0.0, 0.0, 0.0]
+        self._tracker.reset()
+        self._k = 0
+        self._gear = self._gear_for_speed(self.start_speed)
+        self._shift_timer = 0.0
+        self._a_transfer = (0.0, 0.0)
+        self._a_body = (0.0, 0.0)
+        self._delta_cmd = 0.0
+        self._pedal = 0.0
+        self.wall_contacts = 0
+        self.wall_contact_time = 0.0
+        self.offtrack_time = 0.0
+        self._in_contact = False  # inside a contact episode (with release hysteresis)
+        self._touching = False
+        self._offtrack = False
+        self._update_track_position()
+        return self._observation()
+
+    def step(self, steer_rad: float, pedal: float) -> Observation:
+        """Hold (steering command, pedal) for one control period and integrate.
+
+        Parameters
+        ----------
+        steer_rad : steering angle command at the road wheels, rad (clipped to +-steer_max).
+        pedal : combined pedal in [-1, 1] (throttle >= 0, brake < 0; clipped).
+
+        Raises
+        ------
+        ControlError
+            A command is NaN or infinite.
+        PlantError
+            The car's state became NaN or infinite.
+        """
+        steer = float(steer_rad)
+        u_p = float(pedal)
+        if not (math.isfinite(steer) and math.isfinite(u_p)):
+            raise ControlError(
+                f"SimulatedCar.step got a non-finite command (steer_rad={steer_rad!r}, "
+                f"pedal={pedal!r}) at t = {self._k * self.dt:.2f} s; the controller must return "
+                "finite numbers (check its solver status and fallback)."
+            )
+        p = self.params
+        if self._rng is not None:
+            noise = self._rng.standard_normal(2)
+            steer += p.steer_noise_std * float(noise[0])
+            u_p += p.pedal_noise_std * float(noise[1])
+        steer = min(max(steer, -p.steer_max), p.steer_max)
+        u_p = min(max(u_p, -1.0), 1.0)
+        self._delta_cmd = steer
+        self._pedal = u_p
+        throttle = u_p if u_p > 0.0 else 0.0
+        f_brake = -u_p * p.brake_force_max if u_p < 0.0 else 0.0
+
+        if not math.isfinite(sum(self._state)):
+            self._raise_nonfinite(self._state)
+        speed = abs(self._state[SimState.VX])
+        n_sub = self._n_base
+        # Shrink the substep at low speed, where the tire modes get stiff (see __init__).
+        n_low = math.ceil(self.dt * self._stiffness / max(speed, p.v_min_slip) / 2.0)
+        if n_low > n_sub:
+            n_sub = min(n_low, 200)
+        h = self.dt / n_sub
+        for _ in range(n_sub):
+            f_drive = self._powertrain(throttle, h)
+            self._rk4(h, steer, f_drive, f_brake)
+            self._update_track_position(h)
+        self._k += 1
+        return self._observation()
+
+    # ------------------------------------------------------------------ internals
+    def _gear_for_speed(self, v: float) -> int:
+        p = self.params
+        for g in range(1, len(p.gear_ratios) + 1):
+            if gear_rpm(p, v, g) < p.upshift_rpm:
+                return g
+        return len(p.gear_ratios)
+
+    def _powertrain(self, throttle: float, h: float) -> float:
+        """Automatic gearbox (by rpm, torque cut while shifting) and drive force for one substep."""
+        p = self.params
+        vx = self._state[SimState.VX]
+        rpm = gear_rpm(p, vx, self._gear)
+        if rpm > p.upshift_rpm and self._gear < len(p.gear_ratios):
+            self._gear += 1
+            self._shift_timer = p.shift_time
+        elif rpm < p.downshift_rpm and self._gear > 1:
+            self._gear -= 1
+            self._shift_timer = p.shift_time
+        if self._shift_timer > 0.0:
+            self._shift_timer -= h
+            return 0.0
+        if throttle <= 0.0:
+            return 0.0  # no engine braking: pedal 0 coasts (documented in VehicleParams)
+        return drive_force(p, vx, throttle, self._gear)
+
+    def _rk4(self, h: float, delta_cmd: float, f_drive: float, f_brake: float) -> None:
+        p = self.params
+        theta = self._theta
+        mu_w = self._mu_wheels
+        a_tr = self._a_transfer
+        y0 = self._state
+        # Loads are frozen over the substep (quasi-static, previous substep's accelerations).
+        k1, _ = car_vector_field(y0, delta_cmd, f_drive, f_brake, theta, mu_w, a_tr, p)
+        y1 = [a + 0.5 * h * b for a, b in zip(y0, k1, strict=True)]
+        k2, _ = car_vector_field(y1, delta_cmd, f_drive, f_brake, theta, mu_w, a_tr, p)
+        y2 = [a + 0.5 * h * b for a, b in zip(y0, k2, strict=True)]
+        k3, _ = car_vector_field(y2, delta_cmd, f_drive, f_brake, theta, mu_w, a_tr, p)
+        y3 = [a + h * b for a, b in zip(y0, k3, strict=True)]
+        k4, a_g = car_vector_field(y3, delta_cmd, f_drive, f_brake, theta, mu_w, a_tr, p)
+        c = h / 6.0
+        new = [
+            a + c * (b1 + 2.0 * b2 + 2.0 * b3 + b4)
+            for a, b1, b2, b3, b4 in zip(y0, k1, k2, k3, k4, strict=True)
+        ]
+        if not math.isfinite(sum(new)):
+            self._raise_nonfinite(new)
+        self._state = new
+        # The ground-force accelerations at the end of the substep set the next loads.
+        self._a_transfer = a_g
+        vx, vy, r = new[SimState.VX], new[SimState.VY], new[SimState.R]
+        self._a_body = (k4[SimState.VX] - r * vy, k4[SimState.VY] + r * vx)
+
+    def _raise_nonfinite(self, state: list[float]) -> None:
+        bad = [
+            f"{SimState(i).name.lower()}={v}" for i, v in enumerate(state) if not math.isfinite(v)
+        ]
+        old = ", ".join(f"{SimState(i).name.lower()}={v:.4g}" for i, v in enumerate(self._state))
+        if state is self._state:
+            old = "state was already non-finite before this step"
+        raise PlantError(
+            f"SimulatedCar state became non-finite ({', '.join(bad) or 'overflow'}) at "
+            f"t = {self._k * self.dt:.2f} s (before the step: {old}). Likely cause: non-physical "
+            "VehicleParams (e.g. a tiny mass or inertia) or a substep too long for them; check the "
+            "parameters or pass a smaller `substep`."
+        )
+
+    def _update_track_position(self, h: float = 0.0) -> None:
+        """Frenet position, edge friction and walls after a substep of length h."""
+        st = self._state
+        x, y, psi = st[SimState.X], st[SimState.Y], st[SimState.PSI]
+        if not (math.isfinite(x) and math.isfinite(y)):
+            self._raise_nonfinite(st)
+        s, e_y = self._tracker.project(x, y)
+        heading, wl, wr, grade = self._lookup(s)
+        e_psi = (psi - heading + math.pi) % _TWO_PI - math.pi
+        sp, cp = math.sin(e_psi), math.cos(e_psi)
+        self._s, self._e_y, self._e_psi = s, e_y, e_psi
+        self._theta = grade
+        mu = self._mu
+        if self._walls:
+            self._mu_wheels = (mu, mu, mu, mu)
+            self._walls_check(h, heading, wl, wr, sp, cp)
+            return
+        # Open track: each wheel beyond the edge runs on the run-off's lower friction.
+        mu_off = mu * self.params.offtrack_mu_factor
+        mus = []
+        off = False
+        for lx, ly in self._wheels_xy:
+            e_w = e_y + lx * sp + ly * cp
+            if e_w > wl or e_w < -wr:
+                mus.append(mu_off)
+                off = True
+            else:
+                mus.append(mu)
+        self._mu_wheels = tuple(mus)
+        self._offtrack = off
+        if off:
+            self.offtrack_time += h
+
+    def _walls_check(
+        self, h: float, heading: float, wl: float, wr: float, sp: float, cp: float
+    ) -> None:
+        """Keep the body's corners inside the walls; a contact is a plastic impact at the corner.
+
+        The deepest corner is pushed back onto the wall, and an impulse at that corner removes its
+        velocity into the wall (no bounce). The impulse acts at the corner, so it also turns the
+        car (a nose-first hit swings the car parallel to the wall), and wall friction takes
+        tangential speed in proportion to it; the first impact of an episode costs a further share
+        of the speed (`wall_entry_keep`).
+        """
+        p = self.params
+        e_y = self._e_y
+        # Lateral extent of the body corners relative to the centerline (local straight
+        # approximation of the edge, good to millimetres at these corner sizes).
+        front, rear, half_w = self._body_front, self._body_rear, 0.5 * p.width
+        half_wc = half_w * abs(cp)
+        pen_left = e_y + max(front * sp, rear * sp) + half_wc - wl
+        pen_right = -wr - (e_y + min(front * sp, rear * sp) - half_wc)
+        if pen_left <= 0.0 and pen_right <= 0.0:
+            self._touching = False
+            if self._in_contact and min(-pen_left, -pen_right) > p.wall_release_gap:
+                self._in_contact = False
+            return
+        # into = +1: the left wall (along the path normal n, which points left); -1: the right one.
+        if pen_left >= pen_right:
+            depth, into = pen_left, 1.0
+        else:
+            depth, into = pen_right, -1.0
+        # The deepest corner in body coordinates.
+        lx = front if into * sp > 0.0 else rear
+        ly = into * half_w if cp > 0.0 else -into * half_w
+        st = self._state
+        nx, ny = -math.sin(heading), math.cos(heading)
+        st[SimState.X] -= into * depth * nx
+        st[SimState.Y] -= into * depth * ny
+        self._e_y = e_y - into * depth
+        entering = not self._in_contact
+
+        psi, r = st[SimState.PSI], st[SimState.R]
+        c, s = math.cos(psi), math.sin(psi)
+        vx, vy = st[SimState.VX], st[SimState.VY]
+        vwx, vwy = vx * c - vy * s, vx * s + vy * c  # CoG velocity, world frame
+        cx, cy = lx * c - ly * s, lx * s + ly * c  # corner relative to the CoG, world frame
+        ncx, ncy = -into * nx, -into * ny  # contact normal, from the wall into the track
+        tcx, tcy = -ncy, ncx  # contact tangent
+        vcx, vcy = vwx - r * cy, vwy + r * cx  # corner velocity
+        v_n = vcx * ncx + vcy * ncy  # < 0: the corner moves into the wall
+        if v_n < 0.0:
+            inv_m, inv_i = 1.0 / p.m, 1.0 / p.I_zz
+            arm_n = cx * ncy - cy * ncx  # (corner x normal)_z
+            arm_t = cx * tcy - cy * tcx
+            j_n = -v_n / (inv_m + arm_n * arm_n * inv_i)  # plastic: corner's normal speed -> 0
+            v_t = vcx * tcx + vcy * tcy
+            j_t_stop = abs(v_t) / (inv_m + arm_t * arm_t * inv_i)
+            j_t = -math.copysign(min(p.wall_mu * j_n, j_t_stop), v_t)  # Coulomb wall friction
+            vwx += (j_n * ncx + j_t * tcx) * inv_m
+            vwy += (j_n * ncy + j_t * tcy) * inv_m
+            r += (j_n * arm_n + j_t * arm_t) * inv_i
+        if entering:
+            # Impact losses beyond friction (crushing, scrubbing): keep a share of the speed.
+            vwx *= p.wall_entry_keep
+            vwy *= p.wall_entry_keep
+            self.wall_contacts += 1
+            self._in_contact = True
+        st[SimState.VX] = vwx * c + vwy * s
+        st[SimState.VY] = -vwx * s + vwy * c
+        st[SimState.R] = r
+        self._touching = True
+        self.wall_contact_time += h
+
+    def _observation(self) -> Observation:
+        st = self._state
+        return Observation(
+            self._k * self.dt,
+            st[SimState.X],
+            st[SimState.Y],
+            st[SimState.PSI],
+            st[SimState.VX],
+            st[SimState.VY],
+            st[SimState.R],
+        )
+
+    # ------------------------------------------------------------------ extras for logs
+    def state_info(self) -> dict[str, Any]:
+        """Internal quantities for logs (chapter 02); not part of the `Plant` protocol.
+
+        Returns
+        -------
+        dict with: ``gear``, ``rpm`` (engine, rpm), ``shifting`` (bool), ``steer`` (actual road
+        wheel angle, rad), ``steer_cmd`` (rad), ``pedal`` (applied, with noise), ``s`` (m), ``e_y``
+        (m), ``e_psi`` (rad), ``grade`` (rad), ``a_x``, ``a_y`` (measured body-frame acceleration
+        of the CoG, m/s^2), ``F_z`` (wheel loads FL, FR, RL, RR, N), ``mu_wheels``, ``mu_trial``,
+        ``touching_wall``, ``offtrack``, ``wall_contacts``, ``wall_contact_time``,
+        ``offtrack_time``.
+        """
+        p = self.params
+        vx = self._state[SimState.VX]
+        f_z = wheel_loads(p, self._a_transfer[0], self._a_transfer[1], self._theta)
+        return {
+            "gear": self._gear,
+            "rpm": max(gear_rpm(p, vx, self._gear), p.launch_rpm),
+            "shifting": self._shift_timer > 0.0,
+            "steer": self._state[SimState.DELTA],
+            "steer_cmd": self._delta_cmd,
+            "pedal": self._pedal,
+            "s": self._s,
+            "e_y": self._e_y,
+            "e_psi": self._e_psi,
+            "grade": self._theta,
+            "a_x": self._a_body[0],
+            "a_y": self._a_body[1],
+            "F_z": tuple(float(f) for f in f_z),
+            "mu_wheels": self._mu_wheels,
+            "mu_trial": self._mu,
+            "touching_wall": self._touching,
+            "offtrack": self._offtrack,
+            "wall_contacts": self.wall_contacts,
+            "wall_contact_time": self.wall_contact_time,
+            "offtrack_time": self.offtrack_time,
+        }
+
+    def set_state(
+        self,
+        x: float,
+        y: float,
+        psi: float,
+        vx: float,
+        vy: float = 0.0,
+        r: float = 0.0,
+        delta: float = 0.0,
+    ) -> Observation:
+        """Place the car at a given state (tests, exercises); counters and randomness are kept.
+
+        Raises
+        ------
+        PlantError
+            A value is NaN or infinite.
+        """
+        values = [float(v) for v in (x, y, psi, vx, vy, r, delta)]
+        if not all(math.isfinite(v) for v in values):
+            raise PlantError(
+                f"SimulatedCar.set_state got a non-finite value {values}; pass finite numbers."
+            )
+        self._state = values
+        self._gear = self._gear_for_speed(values[SimState.VX])
+        self._shift_timer = 0.0
+        self._a_transfer = (0.0, 0.0)
+        self._tracker.reset()
+        self._update_track_position()
+        return self._observation()

@@ -1,0 +1,109 @@
+"""Checks on the repository itself: style, README and CI agreement, clean notebooks."""
+
+from __future__ import annotations
+
+import json
+import re
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+CHECK_MARK = "# NBVAL_CHECK_OUTPUT"
+
+
+def _ruff() -> list[str]:
+    exe = shutil.which("ruff")
+    return [exe] if exe else [sys.executable, "-m", "ruff"]
+
+
+def test_ruff_check_is_clean():
+    proc = subprocess.run(
+        [*_ruff(), "check", "racing_lib", "tests", "benchmarks", "tools", "conftest.py"],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+    )
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+
+
+def test_ruff_format_is_clean():
+    proc = subprocess.run(
+        [
+            *_ruff(),
+            "format",
+            "--check",
+            "racing_lib",
+            "tests",
+            "benchmarks",
+            "tools",
+            "conftest.py",
+        ],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+    )
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+
+
+def _readme_test_command() -> str:
+    text = (REPO / "README.md").read_text()
+    match = re.search(r"<!-- test-command -->\s*```bash\n(.+?)\n```", text, re.S)
+    assert match, "README.md must mark its test command with <!-- test-command -->"
+    return match.group(1).strip()
+
+
+def test_readme_test_command_runs_pytest_on_a_fresh_install():
+    cmd = _readme_test_command()
+    assert "pip install" in cmd and ".[test]" in cmd and "pytest" in cmd
+
+
+def test_ci_reads_the_readme_command():
+    ci = (REPO / ".ci" / "run").read_text()
+    assert "test-command" in ci, ".ci/run must take its command from the README"
+
+
+def test_every_import_is_a_declared_dependency():
+    """A package imported by racing_lib must be in pyproject's dependencies (fresh installs)."""
+    import tomllib
+
+    deps = tomllib.loads((REPO / "pyproject.toml").read_text())["project"]["dependencies"]
+    declared = {re.split(r"[<>=\[ ]", d)[0].lower().replace("-", "_") for d in deps}
+    aliases = {"control": "control", "cma": "cma", "casadi": "casadi", "tqdm": "tqdm"}
+    stdlib = set(sys.stdlib_module_names)
+    used = set()
+    for py in (REPO / "racing_lib").rglob("*.py"):
+        for line in py.read_text().splitlines():
+            m = re.match(r"\s*(?:from|import)\s+([a-zA-Z_][\w]*)", line)
+            if m:
+                used.add(m.group(1))
+    third_party = {u for u in used if u not in stdlib and u != "racing_lib"}
+    optional = {"dask", "distributed"}  # the [distributed] extra, imported lazily
+    missing = {u for u in third_party - optional if aliases.get(u, u).lower() not in declared}
+    # matplotlib, numpy and scipy are declared under their own names.
+    assert not missing, f"imported but not declared in pyproject.toml: {sorted(missing)}"
+
+
+def _notebooks() -> list[Path]:
+    return sorted((REPO / "notebooks").glob("*.ipynb")) + sorted(
+        (REPO / "exercises").rglob("*.ipynb")
+    )
+
+
+@pytest.mark.parametrize("nb_path", _notebooks(), ids=lambda p: p.name)
+def test_notebook_outputs_are_stripped_except_checked_cells(nb_path: Path):
+    nb = json.loads(nb_path.read_text())
+    for i, cell in enumerate(nb["cells"]):
+        if cell["cell_type"] != "code":
+            continue
+        source = "".join(cell["source"])
+        if CHECK_MARK in source:
+            assert cell.get("outputs"), f"{nb_path.name} cell {i} is checked but has no output"
+        else:
+            assert not cell.get("outputs"), (
+                f"{nb_path.name} cell {i} has committed outputs; run tools/refresh_notebooks.py"
+            )
+            assert cell.get("execution_count") is None

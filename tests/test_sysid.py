@@ -1,0 +1,227 @@
+"""Tests of racing_lib.sysid: identification against the simulated car's true parameters.
+
+The truths are independent of the identification code: the simulated car's ``VehicleParams`` (a
+different, higher-fidelity model than the one identified), analytic derivatives and the analytic
+response of a first-order lag. Data are collected with a seed (7) other than the shipped fit's (0).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+
+import numpy as np
+import pytest
+
+from racing_lib.errors import ModelError
+from racing_lib.model import ModelParams
+from racing_lib.sysid import (
+    TOLERANCES,
+    DriveLog,
+    _samples,
+    collect_logs,
+    identified_params,
+    identify,
+    lap_logs,
+    pedal_map_r2,
+)
+from racing_lib.vehicle import VehicleParams
+
+SEED = 7  # fresh data: the shipped parameter file was fitted with seed 0
+
+
+@pytest.fixture(scope="module")
+def logs() -> list[DriveLog]:
+    # Fast mode's smaller data set (about 2 s to collect): the same manoeuvres, fewer levels.
+    return collect_logs(seed=SEED, fast=True)
+
+
+@pytest.fixture(scope="module")
+def result(logs):
+    return identify(logs, truth=VehicleParams())
+
+
+def _kinds(logs, *kinds):
+    return [log for log in logs if log.kind in kinds]
+
+
+# --------------------------------------------------------------------------- accuracy on fresh data
+
+
+def test_identified_values_within_tolerance_of_the_true_car(result):
+    errors = result.errors()
+    ok = result.within_tolerance()
+    bad = {k: f"{100 * errors[k]:+.1f} % (tolerance {100 * TOLERANCES[k]:.0f} %)" for k in ok}
+    assert all(ok.values()), {k: v for k, v in bad.items() if not ok[k]}
+
+
+def test_known_parameters_are_passed_through(result):
+    known = ModelParams()
+    for name in ("m", "l_f", "l_r", "h_c", "l_t", "mu", "g"):
+        assert getattr(result.params, name) == getattr(known, name)
+
+
+def test_steering_lag_is_identified(result):
+    assert result.steer_tau == pytest.approx(VehicleParams().steer_tau, rel=0.15)
+
+
+def test_car_has_no_engine_braking_and_the_check_says_so(result):
+    # The simulated car coasts at pedal 0 (no engine braking): the check must not invent any.
+    assert any(note.startswith("no engine braking") for note in result.notes)
+
+
+def test_pedal_map_predicts_held_out_acceleration(result, logs):
+    assert result.fits["pedal map (held out)"].r2 > 0.9
+    # A lap never seen by the fit, with another seed.
+    fresh = lap_logs(seed=SEED + 1, tracks=("shortcut",), scalings=(0.7,), max_time=60.0)
+    assert pedal_map_r2(result.params, fresh, result.steer_tau) > 0.9
+
+
+def test_report_lists_fitted_and_true_values(result):
+    text = result.report()
+    for word in ("C_xw", "c_rr", "I_zz", "mu*D_f", "C_alpha_r", "pedal m_thr", "true", "R^2"):
+        assert word in text
+    assert result.value("C_xw") == pytest.approx(VehicleParams().C_xw, rel=TOLERANCES["C_xw"])
+
+
+# --------------------------------------------------------------------- corrupted data must fail
+
+
+def test_corrupted_steering_regressor_breaks_the_tyre_tolerance(logs):
+    # Steering commands logged 30 % too small (a mis-scaled sensor): the front slip angles are
+    # wrong, and the front cornering stiffness must leave its tolerance.
+    bad = [dataclasses.replace(log, steer=0.7 * log.steer) for log in logs]
+    ok = identify(bad, truth=VehicleParams()).within_tolerance()
+    assert not ok["C_alpha_f"]
+
+
+def test_corrupted_time_axis_breaks_the_drag_tolerance(logs):
+    # The coast-down's clock running 20 % fast: every derivative is 1/1.2 of the truth.
+    bad = [
+        dataclasses.replace(log, t=log.t[0] + 1.2 * (log.t - log.t[0]))
+        if log.kind == "coast-down"
+        else log
+        for log in logs
+    ]
+    ok = identify(bad, truth=VehicleParams()).within_tolerance()
+    assert not ok["C_xw"]
+
+
+# --------------------------------------------------------------------------------- bad input
+
+
+def test_too_short_logs_are_refused(logs):
+    short = [dataclasses.replace(_truncate(log, 30)) for log in logs[:2]]
+    with pytest.raises(ModelError, match="too short"):
+        identify(short)
+
+
+def test_logs_without_steering_manoeuvres_name_the_circles(logs):
+    with pytest.raises(ModelError, match="'circles'") as info:
+        identify(_kinds(logs, "coast-down", "laps"))
+    assert "Pacejka" in str(info.value)
+
+
+def test_logs_without_steering_at_all_name_the_circles(logs):
+    # The coast-down relabelled as a circle test: almost no steering, tiny lateral acceleration.
+    fake = [dataclasses.replace(log, kind="circles") for log in _kinds(logs, "coast-down")]
+    with pytest.raises(ModelError, match="'circles'"):
+        identify(fake + _kinds(logs, "coast-down", "laps"))
+
+
+def test_logs_without_coast_down_name_the_coast_down(logs):
+    with pytest.raises(ModelError, match="'coast-down'") as info:
+        identify(_kinds(logs, "circles", "steps", "laps"))
+    assert "C_xw" in str(info.value)
+
+
+def test_constant_speed_coast_down_names_the_coast_down(logs):
+    # Keep only 20 s of the coast-down (about 38 -> 35 m/s): drag and rolling look alike.
+    cd = _kinds(logs, "coast-down")[0]
+    first_coast = int(np.argmax(cd.pedal == 0.0))
+    short_cd = _truncate(cd, first_coast + 200)
+    with pytest.raises(ModelError, match="near-constant speed"):
+        identify([short_cd, *_kinds(logs, "circles", "steps", "laps")])
+
+
+def test_logs_without_yaw_transients_name_the_steps(logs):
+    with pytest.raises(ModelError, match="'steps'") as info:
+        identify(_kinds(logs, "coast-down", "circles"))
+    assert "I_zz" in str(info.value)
+
+
+def test_log_with_nan_is_refused(logs):
+    log = logs[0]
+    vx = log.vx.copy()
+    vx[5] = math.nan
+    with pytest.raises(ModelError, match="NaN"):
+        dataclasses.replace(log, vx=vx)
+
+
+# ---------------------------------------------------------------- building blocks, analytic truths
+
+
+def _truncate(log: DriveLog, n: int) -> DriveLog:
+    nodes = {k: getattr(log, k)[: n + 1] for k in ("t", "x", "y", "psi", "vx", "vy", "r", "theta")}
+    return dataclasses.replace(log, steer=log.steer[:n], pedal=log.pedal[:n], **nodes)
+
+
+def _synthetic(vx, steer, dt=0.1) -> DriveLog:
+    n = len(steer)
+    t = dt * np.arange(n + 1)
+    z = np.zeros(n + 1)
+    return DriveLog("synthetic", "steps", t, z, z, z, vx, z, z, z, steer, np.zeros(n))
+
+
+def test_interval_derivative_is_the_exact_mean_acceleration():
+    # v(t) = 10 + 0.5 t^2: the mean of dv/dt = t over [t_k, t_k+1] is the midpoint time, exactly.
+    t = 0.1 * np.arange(21)
+    S = _samples([_synthetic(10.0 + 0.5 * t**2, np.zeros(20))], "interval")
+    np.testing.assert_allclose(S.dvx, 0.5 * (t[:-1] + t[1:]), rtol=0, atol=1e-12)
+
+
+def test_savgol_derivative_is_exact_on_a_parabola():
+    t = 0.1 * np.arange(31)
+    S = _samples([_synthetic(10.0 + 0.5 * t**2, np.zeros(30))], "savgol")
+    np.testing.assert_allclose(S.dvx, 0.5 * (t[:-1] + t[1:]), atol=1e-9)
+
+
+def test_steering_lag_reconstruction_matches_the_analytic_step_response():
+    # Command steps from 0 to 0.1 rad at period 1; the actual angle of a first-order lag is
+    # 0.1 (1 - exp(-t / tau)), whose mean over the first period after the step is
+    # 0.1 (1 - tau / dt (1 - exp(-dt / tau))).
+    tau, dt = 0.08, 0.1
+    steer = np.r_[0.0, np.full(9, 0.1)]
+    S = _samples([_synthetic(np.full(11, 20.0), steer)], "interval")
+    eff = S.steer_effective(tau)
+    assert eff[0] == 0.0
+    expected = 0.1 * (1.0 - tau / dt * (1.0 - math.exp(-dt / tau)))
+    assert eff[1] == pytest.approx(expected, rel=1e-12)
+    # One period later the lag has advanced by exp(-dt/tau) more.
+    expected2 = 0.1 * (1.0 - math.exp(-dt / tau) * tau / dt * (1.0 - math.exp(-dt / tau)))
+    assert eff[2] == pytest.approx(expected2, rel=1e-12)
+
+
+# ------------------------------------------------------------------------------ shipped parameters
+
+
+def test_shipped_parameters_come_from_the_current_car():
+    from importlib import resources
+
+    data = json.loads(
+        (resources.files("racing_lib") / "data" / "identified_params.json").read_text("utf-8")
+    )
+    shipped = data["vehicle_params"]
+    current = json.loads(json.dumps(dataclasses.asdict(VehicleParams())))  # tuples -> lists
+    changed = sorted(k for k in current if shipped.get(k) != current[k])
+    assert not changed, f"VehicleParams changed ({changed}): run `python -m racing_lib.sysid`"
+
+
+def test_shipped_parameters_load_and_are_plausible():
+    p = identified_params()
+    truth = VehicleParams()
+    assert isinstance(p, ModelParams)
+    assert p.C_xw == pytest.approx(truth.C_xw, rel=TOLERANCES["C_xw"])
+    assert p.I_zz == pytest.approx(truth.I_zz, rel=TOLERANCES["I_zz"])
+    assert p.pedal.m_thr > 0.0 and p.pedal.m_brk > p.pedal.m_thr  # brakes beat the engine
