@@ -98,9 +98,13 @@ def plot_track(
     start_line : bool
         Draw the start/finish line at s = 0.
     """
-    if ax is None:
-        _, ax = plt.subplots(figsize=(7, 7))
     left, right = track_edges(track)
+    if ax is None:
+        # Size the figure to the track's shape so that a long circuit is not lost in white space.
+        both = np.vstack([left, right])
+        w, h = np.ptp(both[:, 0]), np.ptp(both[:, 1])
+        aspect = float(np.clip(h / max(w, 1e-9), 0.3, 1.5))
+        _, ax = plt.subplots(figsize=(9.0, max(3.0, 9.0 * aspect)))
     style = "-" if track.boundary == "walls" else "--"
     for edge in (left, right):
         ax.plot(edge[:, 0], edge[:, 1], style, color=COLORS["boundary"], lw=1.0)

@@ -24,19 +24,25 @@ CHECK_MARK = "# NBVAL_CHECK_OUTPUT"
 
 
 def strip(nb: nbformat.NotebookNode) -> None:
-    """Remove outputs and counters except on checked cells (their counters go too)."""
+    """Remove outputs and counters except on checked cells.
+
+    nbval treats a cell with outputs but no execution count as "unrun", so checked cells keep a
+    count (renumbered 1, 2, ... so that re-running does not change the file needlessly).
+    """
+    count = 0
     for cell in nb.cells:
         if cell.cell_type != "code":
             continue
-        cell.execution_count = None
-        keep = CHECK_MARK in cell.source
-        if keep:
+        cell.metadata.pop("execution", None)
+        if CHECK_MARK in cell.source:
+            count += 1
+            cell.execution_count = count
             for out in cell.outputs:
                 if "execution_count" in out:
-                    out["execution_count"] = None
+                    out["execution_count"] = count
         else:
+            cell.execution_count = None
             cell.outputs = []
-        cell.metadata.pop("execution", None)
     nb.metadata.pop("widgets", None)
 
 

@@ -20,6 +20,10 @@ from racing_lib.track import FrenetTracker, Path
 
 SpeedFunction = Callable[[float], float]
 
+#: Fraction of a plan's speed the nominal controller is asked to drive at by default: pure pursuit
+#: has no model of grip, so it laps the built-in tracks cleanly only with a margin (chapter 01).
+MODERATE_SPEED_SCALE = 0.75
+
 
 @dataclass(frozen=True)
 class NominalSettings:

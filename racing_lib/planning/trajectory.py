@@ -227,6 +227,32 @@ class Trajectory:
         """Planned v_x at arc length ``s`` (m), for controllers that want a speed function."""
         return self.interpolate(s).vx
 
+    def scale_speed(self, factor: float) -> Trajectory:
+        """The same line driven ``factor`` times as fast (a gentler reference when < 1).
+
+        Speeds and yaw rate scale with ``factor``, times with ``1 / factor`` and the longitudinal
+        acceleration with ``factor**2``; the line and the steering are kept. Used for the moderate
+        reference of the nominal controller (chapter 01).
+
+        Parameters
+        ----------
+        factor : float
+            Positive speed ratio, dimensionless.
+        """
+        k = float(factor)
+        if not (math.isfinite(k) and k > 0.0):
+            raise PlanningError(f"scale_speed needs a positive factor, got {factor!r}.")
+        return dataclasses.replace(
+            self,
+            vx=self.vx * k,
+            vy=self.vy * k,
+            r=self.r * k,
+            ax=self.ax * k * k,
+            t=self.t / k,
+            planned_lap_time=self.planned_lap_time / k,
+            info={**self.info, "speed_scale": k},
+        )
+
     # ------------------------------------------------------------------ files
     def metadata(self) -> dict[str, Any]:
         """The metadata written in a plan file's header."""

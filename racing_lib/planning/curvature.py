@@ -1,0 +1,665 @@
+"""Stage one of the two-stage planner: the iterated curvature-optimal QP (taught in notebook 03).
+
+The paper (Section "Minimum Curvature Trajectory Optimization") approximates the lap time by the
+curvature of the line, kappa ~ r / v_x, and minimizes it subject to the vehicle dynamics linearized
+around the previous solution, with the speed v_x replaced by a fixed estimate v_hat so that the
+objective is quadratic. Each iteration:
+
+1. linearize the spatial-domain model of :mod:`racing_lib.model` (its exact Jacobians,
+   :func:`racing_lib.model.jacobians` with ``domain="spatial"``) at steady cornering on the current
+   line at the speed v_hat;
+2. solve the QP below (cvxpy; Clarabel by default, OSQP on request);
+3. rebuild the line from the new lateral offsets e_y, compute its curvature and its quasi-steady
+   speed profile (:func:`racing_lib.planning.speed.speed_profile`): that gives the next v_hat;
+
+until the line stops moving (max |Delta e_y| < ``tol``: 'converged') or its lap time stops
+improving (``patience`` iterations: 'settled'). It starts from the centerline and returns the
+fastest line found.
+
+The QP, on N nodes of the centerline (periodic, a flying lap)::
+
+    min  sum_k  (L r_k / v_hat_k)^2 + w_1 (v_y,k / v_hat_k)^2 + w_2 (delta_k - delta_{k-1})^2
+                + w_prox (e_y,k - e_y,k^prev)^2
+    s.t. xi_{k+1} - xi_k = ds_k / 2 (f_k + f_{k+1}),  f_k = A_k xi_k + B_k delta_k + c_k
+         e_y,min,k <= e_y,k <= e_y,max,k      (track width minus half the car and a margin)
+         |delta_k| <= delta_max
+
+with the lateral state xi = (v_y, r, e_psi, e_y). What made it converge where the paper's weights
+taken literally in SI units did not (see MEASURED.md):
+
+* **Dimensionless terms.** The curvature r / v_hat (1/m) is multiplied by the wheelbase L, which
+  turns it into the kinematic steering angle of the line (rad); the lateral velocity enters as the
+  side-slip angle v_y / v_hat (rad); the steering change is in rad. All terms are squared angles,
+  so the weights are dimensionless and comparable, and the paper's w_1 = 0.015 and w_2 = 0.01 work
+  as they are (defaults). In SI units the v_y^2 term (m^2/s^2) is about 1e4 times larger than
+  (r / v)^2 (1/m^2) for the same motion and swamps it. Measured (3 m grid): w_1 = 0.015 gave
+  98.6 s on the expressway and 72.0 s on Norisring, w_1 = 0.3 gave 99.8 s and 72.1 s.
+* **v_x prescribed at a fraction of the speed profile.** v_x is not a decision variable: it is
+  fixed to v_hat = ``speed_fraction`` (0.9) times the speed profile of the current line. Near
+  100 % the tires sit at the peak of their force curve in every corner, where the linearized
+  lateral dynamics lose their cornering stiffness: with 1.0 the first QP on the expressway failed
+  in Clarabel and Norisring ended 0.7 s slower. The final line is driven at its full profile.
+* **Linearization at steady cornering** (:func:`steady_cornering`), not at the kinematic guess
+  (v_y = 0, delta = L kappa): the kinematic guess puts hairpins past the tire peak, where the
+  linearized dynamics are unstable (an eigenvalue of +35 per metre on Norisring) and the QP
+  infeasible.
+* **Trapezoidal discretization** of the linearized dynamics: an explicit RK4 step of 3-5 m is
+  unstable at hairpin speeds (the lateral dynamics decay over about 1 m there); the trapezoidal
+  rule is A-stable and matches the NLP's collocation.
+* **Damping**: v_hat is under-relaxed (``relaxation``) and, after ``full_steps``, the line moves
+  only ``line_step`` of the way to each new QP solution; without it the line swung by 1-2 m
+  between iterations on Brands Hatch and the expressway.
+
+The fixed-point iteration is not a descent method on the lap time: on the expressway the
+speed-profile lap time drops from 108.7 s (centerline) to 100.1 s in two QPs and then creeps back
+up by about 1 s over 20 more iterations as the line wanders in a long constant-radius corner;
+hence the 'settled' rule and returning the fastest line.
+
+The constraint matrices change with every linearization, so the problem is rebuilt for each
+iteration from sparse matrices in one vectorized constraint (cvxpy compiles it in tens of ms);
+cvxpy Parameters would need dense per-node matrices.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import scipy.sparse as sp
+
+from racing_lib.errors import PlanningError
+from racing_lib.planning.speed import speed_profile
+from racing_lib.planning.trajectory import Trajectory, default_model_inputs
+
+#: Body width of the default car (racing_lib.vehicle.VehicleParams.width), m.
+DEFAULT_CAR_WIDTH = 2.008
+#: Default clearance between the car's side and a wall, m.
+WALL_MARGIN = 0.5
+#: Default clearance between the car's side and the edge of an open track, m.
+OPEN_MARGIN = 0.3
+
+
+@dataclass(frozen=True)
+class TrackGrid:
+    """The planning grid: N equally spaced nodes along the track centerline.
+
+    Attributes
+    ----------
+    s : ndarray (N,)
+        Arc length of the nodes along the centerline, m.
+    ds : ndarray (N,)
+        Distance from node k to node k+1 (the last wraps to node 0), m.
+    kappa, theta : ndarray (N,)
+        Centerline curvature (1/m) and road grade (rad) at the nodes.
+    ey_min, ey_max : ndarray (N,)
+        Bounds on the lateral offset e_y of the car's centre, m (right edge + clearance, left edge -
+        clearance).
+    length : float
+        Lap length along the centerline, m.
+    """
+
+    s: np.ndarray
+    ds: np.ndarray
+    kappa: np.ndarray
+    theta: np.ndarray
+    ey_min: np.ndarray
+    ey_max: np.ndarray
+    length: float
+    track: Any = None
+
+    @property
+    def n(self) -> int:
+        """Number of nodes."""
+        return int(self.s.size)
+
+    @classmethod
+    def from_track(
+        cls,
+        track: Any,
+        spacing: float = 3.0,
+        car_width: float = DEFAULT_CAR_WIDTH,
+        margin: float | None = None,
+    ) -> TrackGrid:
+        """Sample ``track`` every ``spacing`` m and compute the e_y bounds.
+
+        Parameters
+        ----------
+        track : Track
+            The track.
+        spacing : float
+            Node spacing, m (rounded so the nodes divide the lap evenly).
+        car_width : float
+            Body width of the car, m.
+        margin : float, optional
+            Clearance between the car's side and the edge, m (default 0.5 with walls, 0.3 open).
+
+        Raises
+        ------
+        PlanningError
+            If the track is narrower than the car plus the margins somewhere.
+        """
+        if not spacing > 0:
+            raise PlanningError(f"grid spacing must be positive, got {spacing!r} m.")
+        line = track.centerline
+        n = max(16, int(round(line.length / spacing)))
+        s = np.asarray(line.sample(n=n), float)
+        if margin is None:
+            margin = WALL_MARGIN if getattr(track, "boundary", "open") == "walls" else OPEN_MARGIN
+        half = 0.5 * car_width + margin
+        wl = np.asarray(track.width_left(s), float)
+        wr = np.asarray(track.width_right(s), float)
+        ey_max = wl - half
+        ey_min = -(wr - half)
+        room = ey_max - ey_min
+        if np.any(room < 0.05):
+            k = int(np.argmin(room))
+            raise PlanningError(
+                f"track {getattr(track, 'name', '?')!r} is too narrow for the car near s = "
+                f"{s[k]:.0f} m: {wl[k] + wr[k]:.2f} m wide, but the car needs "
+                f"{car_width:.2f} m plus {margin:.2f} m clearance on each side; no planner can "
+                "keep it on the track. Use a smaller car_width/margin or fix the track widths."
+            )
+        return cls(
+            s=s,
+            ds=np.diff(np.append(s, line.length)),
+            kappa=np.asarray(line.curvature(s), float),
+            theta=np.asarray(track.grade(s), float),
+            ey_min=ey_min,
+            ey_max=ey_max,
+            length=float(line.length),
+            track=track,
+        )
+
+    def line_xy(self, e_y: np.ndarray, e_psi: np.ndarray | None = None) -> tuple[Any, Any, Any]:
+        """Cartesian (x, y, psi) of a line given by its offsets e_y (m) at the nodes."""
+        return self.track.centerline.to_cartesian(self.s, e_y, e_psi)
+
+    def line_curvature(self, e_y: np.ndarray) -> np.ndarray:
+        """Curvature (1/m) at the nodes of the line with offsets e_y, from a spline through it."""
+        from racing_lib.track import Path
+
+        x, y, _ = self.line_xy(e_y)
+        path = Path(x, y, check=False)
+        # The spline's arc length of each node: chord lengths scaled to the spline's length.
+        chord = np.hypot(np.diff(np.append(x, x[0])), np.diff(np.append(y, y[0])))
+        s_line = np.concatenate(([0.0], np.cumsum(chord[:-1]))) * path.length / chord.sum()
+        return np.asarray(path.curvature(s_line), float), s_line, path.length
+
+
+@dataclass(frozen=True)
+class CurvatureSettings:
+    """Settings of the curvature-optimal QP.
+
+    Attributes
+    ----------
+    spacing : float
+        Node spacing along the centerline, m.
+    w_vy : float
+        Weight of the squared side-slip angle (v_y / v_hat)^2 (the paper's w_1), dimensionless.
+    w_ddelta : float
+        Weight of the squared steering change (delta_k - delta_{k-1})^2 (the paper's w_2),
+        dimensionless.
+    speed_fraction : float
+        v_hat = this fraction of the speed profile (see the module docstring), dimensionless.
+    max_iterations : int
+        Maximum number of QPs.
+    tol : float
+        Stop ('converged') when the line moves less than this between iterations (max |Delta e_y|),
+        m.
+    car_width : float
+        Body width of the car, m.
+    margin : float or None
+        Clearance to the track edge, m (None: 0.5 with walls, 0.3 on an open track).
+    delta_max : float
+        Steering angle bound, rad.
+    v_top : float or None
+        Top speed for the speed profile, m/s (None: 190 km/h).
+    osqp_eps : float
+        OSQP's absolute and relative tolerance (when ``solver="OSQP"``).
+    solver : str
+        QP solver through cvxpy: ``"CLARABEL"`` (default) or ``"OSQP"``. Both give the same lines;
+        Clarabel (interior point) is faster here: on Norisring (4 m grid, 574 nodes, no proximal
+        term) about 0.25 s per QP against 3 s for OSQP at eps 1e-6, whose ADMM iterations crawl
+        along the long periodic chain of dynamics; with the proximal term the whole iteration took
+        11 s (Clarabel) against 18 s (OSQP) on a 3 m grid.
+    relaxation : float
+        Under-relaxation of v_hat between iterations (1 = take the new speed profile whole).
+    w_prox : float
+        Weight of (e_y - e_y,prev)^2, 1/m^2: a tie-breaker for straights, where the curvature does
+        not care where the line lies.
+    line_step : float
+        After ``full_steps`` iterations the line moves only this fraction of the way to the new QP
+        solution (damped fixed-point iteration).
+    full_steps : int
+        Number of undamped iterations at the start.
+    lap_tol : float
+        An iteration counts as an improvement if it lowers the speed-profile lap time by more than
+        this, s.
+    patience : int
+        Stop ('settled') after this many iterations without improvement; the fastest line found is
+        returned.
+    """
+
+    spacing: float = 3.0
+    w_vy: float = 0.015
+    w_ddelta: float = 0.01
+    speed_fraction: float = 0.9
+    max_iterations: int = 25
+    tol: float = 0.1
+    car_width: float = DEFAULT_CAR_WIDTH
+    margin: float | None = None
+    delta_max: float = 0.5
+    v_top: float | None = None
+    osqp_eps: float = 1e-4
+    solver: str = "CLARABEL"
+    relaxation: float = 0.5
+    line_step: float = 0.5
+    full_steps: int = 3
+    lap_tol: float = 0.02
+    patience: int = 3
+    w_prox: float = 1e-6
+
+
+@dataclass
+class CurvatureResult:
+    """Result of :func:`solve_curvature`.
+
+    Attributes
+    ----------
+    success : bool
+        True when the iteration stopped by itself ('converged' or 'settled').
+    status : str
+        'converged' (the line stopped moving), 'settled' (its lap time stopped improving), or
+        'max_iterations'.
+    iterations : int
+        Number of QPs solved.
+    solve_time : float
+        Wall time of the whole iteration (linearizations, QPs, speed profiles), s.
+    qp_time : float
+        Time spent inside cvxpy/OSQP (compilation and solve), s.
+    trajectory : Trajectory
+        The fastest line found, driven at its full speed profile.
+    history : list of float
+        Max |Delta e_y| of each iteration, m.
+    lap_times : list of float
+        Speed-profile lap time of the line after each iteration, s.
+    e_y, e_psi, v_y, r, delta : ndarray (N,)
+        The last QP's solution on the grid (Frenet states relative to the centerline).
+    v_x, a_x : ndarray (N,)
+        Speed profile of the final line (m/s) and its acceleration (m/s^2) on the grid.
+    grid : TrackGrid
+        The grid the QP was solved on.
+    """
+
+    success: bool
+    status: str
+    iterations: int
+    solve_time: float
+    qp_time: float
+    trajectory: Trajectory
+    history: list[float] = field(default_factory=list)
+    lap_times: list[float] = field(default_factory=list)
+    e_y: np.ndarray | None = None
+    e_psi: np.ndarray | None = None
+    v_y: np.ndarray | None = None
+    r: np.ndarray | None = None
+    delta: np.ndarray | None = None
+    v_x: np.ndarray | None = None
+    a_x: np.ndarray | None = None
+    grid: TrackGrid | None = None
+
+
+def steady_cornering(
+    v: np.ndarray, kappa: np.ndarray, params: Any, max_use: float = 0.98
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Lateral velocity, yaw rate and steering of steady cornering at speed v on curvature kappa.
+
+    Each axle carries its static share of the lateral acceleration v^2 kappa; the slip angle that
+    gives it is found by inverting the simplified Pacejka curve (tire force proportional to load),
+    then v_y and delta follow from the slip-angle definitions of the model. Used as the
+    linearization point of the QP and as the initial guess of the NLP; not a model of its own.
+
+    Parameters
+    ----------
+    v : ndarray
+        Speed, m/s.
+    kappa : ndarray
+        Curvature of the line, 1/m.
+    params : ModelParams
+        Mass geometry and Pacejka factors.
+    max_use : float
+        Friction use is capped at this fraction of the tire peak (beyond it there is no solution).
+
+    Returns
+    -------
+    v_y (m/s), r (rad/s), delta (rad) : ndarray
+    """
+    v = np.asarray(v, float)
+    kappa = np.asarray(kappa, float)
+    r = v * kappa
+    a_y = v * v * kappa
+    g = float(getattr(params, "g", 9.81))
+
+    def slip(B: float, C: float, D: float) -> np.ndarray:
+        use = np.clip(a_y / (g * params.mu * D), -max_use, max_use)
+        return np.tan(np.arcsin(use) / C) / B
+
+    alpha_f = slip(params.B_f, params.C_f, params.D_f)
+    alpha_r = slip(params.B_r, params.C_r, params.D_r)
+    v_safe = np.maximum(v, 1.0)
+    v_y = params.l_r * r - v_safe * alpha_r  # from alpha_r = -(v_y - l_r r) / v_x
+    delta = alpha_f + (v_y + params.l_f * r) / v_safe  # from alpha_f = delta - (v_y + l_f r) / v_x
+    return v_y, r, delta
+
+
+# Lateral state of the QP and the model-state index of each component.
+_LAT = ("VY", "R", "EPSI", "EY")
+
+
+def _lateral_qp(
+    A: np.ndarray,
+    B: np.ndarray,
+    f0: np.ndarray,
+    grid: TrackGrid,
+    v_hat: np.ndarray,
+    wheelbase: float,
+    st: CurvatureSettings,
+    e_y_prev: np.ndarray | None = None,
+) -> tuple[str, np.ndarray | None, float]:
+    """Solve one QP.
+
+    ``A`` (N,4,4), ``B`` (N,4) are the continuous spatial Jacobians of the lateral state at the
+    nodes and ``f0`` (N,4) the affine remainder, dxi/ds ~= A_k xi + B_k delta + f0_k. The dynamics
+    are imposed with the trapezoidal rule, xi_{k+1} - xi_k = ds_k / 2 (f_k + f_{k+1}), which is
+    A-stable: an explicit RK4 step of 3-5 m is unstable at hairpin speeds, where the lateral
+    dynamics in the spatial domain decay over about 1 m.
+    """
+    import cvxpy as cp
+
+    n = grid.n
+    nz = 5 * n  # per node: v_y, r, e_psi, e_y, delta
+    ix = np.arange(n)[:, None] * 5 + np.arange(4)[None, :]  # state columns of node k
+    idl = np.arange(n) * 5 + 4  # delta column of node k
+    nxt = (np.arange(n) + 1) % n
+    h = 0.5 * grid.ds[:, None, None]
+    eye = np.eye(4)[None, :, :]
+    blk_k = -(eye + h * A)  # coefficient of xi_k in interval k
+    blk_k1 = eye - h * A[nxt]  # coefficient of xi_{k+1}
+    rows = np.arange(4 * n).reshape(n, 4)
+    r_a = np.repeat(rows[:, :, None], 4, axis=2).ravel()
+    data = [
+        blk_k.ravel(),
+        blk_k1.ravel(),
+        -(h[:, :, 0] * B).ravel(),
+        -(h[:, :, 0] * B[nxt]).ravel(),
+    ]
+    ri = [r_a, r_a, rows.ravel(), rows.ravel()]
+    ci = [
+        np.repeat(ix[:, None, :], 4, axis=1).ravel(),
+        np.repeat(ix[nxt][:, None, :], 4, axis=1).ravel(),
+        np.repeat(idl, 4),
+        np.repeat(idl[nxt], 4),
+    ]
+    M = sp.csr_matrix(
+        (np.concatenate(data), (np.concatenate(ri), np.concatenate(ci))), shape=(4 * n, nz)
+    )
+    c = h[:, :, 0] * (f0 + f0[nxt])
+    # Objective rows: L r / v_hat, sqrt(w1) v_y / v_hat, sqrt(w2) (delta_k - delta_{k-1}).
+    q_rows = np.concatenate(
+        [np.arange(n), n + np.arange(n), 2 * n + np.arange(n), 2 * n + np.arange(n)]
+    )
+    q_cols = np.concatenate([ix[:, 1], ix[:, 0], idl, idl[np.arange(n) - 1]])
+    q_vals = np.concatenate(
+        [
+            wheelbase / v_hat,
+            math.sqrt(st.w_vy) / v_hat,
+            np.full(n, math.sqrt(st.w_ddelta)),
+            np.full(n, -math.sqrt(st.w_ddelta)),
+        ]
+    )
+    Q = sp.csr_matrix((q_vals, (q_rows, q_cols)), shape=(3 * n, nz))
+    # Proximal term sqrt(w_prox) (e_y - e_y_prev): on straights the curvature does not care where
+    # the line lies, and without it the line drifts there from one iteration to the next.
+    P = sp.csr_matrix((np.full(n, math.sqrt(st.w_prox)), (np.arange(n), ix[:, 3])), shape=(n, nz))
+    e_prev = np.zeros(n) if e_y_prev is None else e_y_prev
+    lb = np.full(nz, -np.inf)
+    ub = np.full(nz, np.inf)
+    lb[ix[:, 3]], ub[ix[:, 3]] = grid.ey_min, grid.ey_max
+    lb[idl], ub[idl] = -st.delta_max, st.delta_max
+    z = cp.Variable(nz)
+    prob = cp.Problem(
+        cp.Minimize(cp.sum_squares(Q @ z) + cp.sum_squares(P @ z - math.sqrt(st.w_prox) * e_prev)),
+        [M @ z == c.ravel(), z >= np.where(np.isfinite(lb), lb, -1e6), z <= np.minimum(ub, 1e6)],
+    )
+    t0 = time.perf_counter()
+    try:
+        if st.solver.upper() == "OSQP":
+            prob.solve(
+                solver=cp.OSQP,
+                eps_abs=st.osqp_eps,
+                eps_rel=st.osqp_eps,
+                max_iter=20000,
+                polish=True,
+                warm_start=False,
+            )
+        else:
+            prob.solve(solver=st.solver.upper())
+    except cp.error.SolverError as exc:
+        return f"solver error: {exc}", None, time.perf_counter() - t0
+    status = str(prob.status)
+    if status not in ("optimal", "optimal_inaccurate") or z.value is None:
+        return status, None, time.perf_counter() - t0
+    return status, np.asarray(z.value).reshape(n, 5), time.perf_counter() - t0
+
+
+def solve_curvature(
+    track: Any,
+    params: Any = None,
+    options: Any = None,
+    settings: CurvatureSettings | None = None,
+    *,
+    grid: TrackGrid | None = None,
+    raise_on_failure: bool = True,
+) -> CurvatureResult:
+    """Iterate the curvature-optimal QP from the centerline until the line settles.
+
+    Parameters
+    ----------
+    track : Track
+        The track (its centerline is the Frenet reference).
+    params : ModelParams, optional
+        Planning model parameters (default ``ModelParams()``).
+    options : ModelOptions, optional
+        Model effects (default ``ModelOptions()``): used in the linearized dynamics and the drag in
+        the speed profile.
+    settings : CurvatureSettings, optional
+        Weights, grid and stopping rule.
+    grid : TrackGrid, optional
+        A grid made beforehand (otherwise built from ``settings``).
+    raise_on_failure : bool
+        Raise :class:`PlanningError` when a QP fails (default); otherwise return ``success=False``.
+
+    Returns
+    -------
+    CurvatureResult
+
+    Raises
+    ------
+    PlanningError
+        OSQP (via cvxpy) reports a QP infeasible or fails; the track is narrower than the car.
+
+    Examples
+    --------
+    >>> from racing_lib.track import load_track
+    >>> res = solve_curvature(load_track("expressway"))  # doctest: +SKIP
+    >>> res.iterations, round(res.trajectory.lap_time, 1)  # doctest: +SKIP
+    """
+    from racing_lib.model import X, jacobians, spatial_dynamics
+
+    st = settings or CurvatureSettings()
+    params, pedal, options = default_model_inputs(params, None, options)
+    t_start = time.perf_counter()
+    if grid is None:
+        grid = TrackGrid.from_track(track, st.spacing, st.car_width, st.margin)
+    n = grid.n
+    wheelbase = float(params.l_f + params.l_r)
+    jac = jacobians(params, options, "spatial").map(n)
+    f_s = spatial_dynamics(params, options).map(n)
+    lat = [int(getattr(X, name)) for name in _LAT]
+
+    # Start: the centerline at its speed profile.
+    e_y = np.zeros(n)
+    e_psi = np.zeros(n)
+    kappa_line, s_line, len_line = grid.kappa, grid.s, grid.length
+    prof: Any = None
+    history: list[float] = []
+    lap_times: list[float] = []
+    qp_time = 0.0
+    status = "not_run"
+    success = False
+    v_y = np.zeros(n)
+    sol = None
+    v_hat_prev: np.ndarray | None = None
+    it = 0
+    prof = speed_profile(
+        s_line, kappa_line, params, pedal, grid.theta, st.v_top, options, length=len_line
+    )
+    lap_times.append(prof.lap_time)
+    best: tuple[float, Any] | None = None
+    since_best = 0
+    for it in range(1, st.max_iterations + 1):  # noqa: B007 - reported
+        v_new = st.speed_fraction * prof.v
+        # Under-relax the speed estimate: the line and its speed profile feed each other, and
+        # taking the new profile whole makes the line swing by a few decimetres forever.
+        v_hat = v_new if v_hat_prev is None else v_hat_prev + st.relaxation * (v_new - v_hat_prev)
+        v_hat_prev = v_hat
+        # Linearize at steady cornering on the current line at v_hat: with the tires on the
+        # stable side of their peak the linearized lateral dynamics are stable.
+        v_y, r_bar, delta_bar = steady_cornering(v_hat, kappa_line, params)
+        # Longitudinal input that makes v_x follow v_hat between nodes (v dv/ds).
+        a_bar = st.speed_fraction**2 * prof.a_x
+        xi_bar = np.zeros((6, n))
+        xi_bar[X.VX] = v_hat
+        xi_bar[X.VY] = v_y
+        xi_bar[X.R] = r_bar
+        xi_bar[X.EPSI] = e_psi
+        xi_bar[X.EY] = e_y
+        xi_bar[X.S] = grid.s
+        u_bar = np.vstack([delta_bar, a_bar])
+        args = (xi_bar, u_bar, grid.kappa[None, :], grid.theta[None, :])
+        A_all, B_all = jac(*args)
+        A_all = np.asarray(A_all).reshape(6, n, 6).transpose(1, 0, 2)
+        B_all = np.asarray(B_all).reshape(6, n, 2).transpose(1, 0, 2)
+        f_bar = np.asarray(f_s(*args)).T
+        A = A_all[:, lat][:, :, lat]
+        B = B_all[:, lat, 0]
+        # v_x and a_x stay at their bar values, so only the lateral deviations enter:
+        # f ~= f_bar + A (xi - xi_bar) + B (delta - delta_bar).
+        xi_lat = xi_bar[lat].T
+        f0 = f_bar[:, lat] - np.einsum("kij,kj->ki", A, xi_lat) - B * delta_bar[:, None]
+        status, new, t_qp = _lateral_qp(A, B, f0, grid, v_hat, wheelbase, st, e_y)
+        qp_time += t_qp
+        if new is None:
+            msg = (
+                f"curvature QP iteration {it}: {st.solver} (via cvxpy) returned status "
+                f"'{status}' on track {getattr(track, 'name', '?')!r}. Try: check that the track "
+                "is wide enough for the car, raise delta_max or the node spacing, or lower "
+                "speed_fraction."
+            )
+            if raise_on_failure:
+                raise PlanningError(msg)
+            break
+        change = float(np.max(np.abs(new[:, 3] - e_y)))
+        history.append(change)
+        if sol is not None and it > st.full_steps:
+            # Damped fixed-point step: the line and its speed estimate feed each other, and on some
+            # tracks the undamped iteration swings between two lines by a metre or two.
+            new = sol + st.line_step * (new - sol)
+        sol = new
+        v_y, e_psi, e_y = new[:, 0], new[:, 2], new[:, 3]
+        kappa_line, s_line, len_line = grid.line_curvature(e_y)
+        prof = speed_profile(
+            s_line, kappa_line, params, pedal, grid.theta, st.v_top, options, length=len_line
+        )
+        lap_times.append(prof.lap_time)
+        if best is None or prof.lap_time < best[0] - st.lap_tol:
+            since_best = 0
+        else:
+            since_best += 1
+        if best is None or prof.lap_time < best[0]:
+            best = (prof.lap_time, (sol, e_y, e_psi, kappa_line, s_line, len_line, prof))
+        if change < st.tol:
+            status, success = "converged", True
+            break
+        if since_best >= st.patience:
+            # The fixed-point iteration is not a descent method on the lap time: once the line
+            # stops getting faster it wanders between nearly equivalent lines (e.g. in long
+            # constant-radius corners, where many lines have the same curvature).
+            status, success = "settled", True
+            break
+    else:
+        status = "max_iterations"
+
+    if sol is None or best is None:
+        raise PlanningError(
+            f"curvature QP: {st.solver} (via cvxpy) found no solution in the first iteration "
+            f"(status '{status}'); check the track widths and the steering limit."
+        )
+    # Keep the fastest line found (by its speed-profile lap time).
+    sol, e_y, e_psi, kappa_line, s_line, len_line, prof = best[1]
+    traj = _trajectory_from_line(grid, e_y, e_psi, sol, prof, kappa_line, len_line, track, options)
+    return CurvatureResult(
+        success=success,
+        status=status,
+        iterations=it,
+        solve_time=time.perf_counter() - t_start,
+        qp_time=qp_time,
+        trajectory=traj,
+        history=history,
+        lap_times=lap_times,
+        e_y=e_y,
+        e_psi=e_psi,
+        v_y=sol[:, 0],
+        r=sol[:, 1],
+        delta=sol[:, 4],
+        v_x=prof.v,
+        a_x=prof.a_x,
+        grid=grid,
+    )
+
+
+def _trajectory_from_line(
+    grid: TrackGrid,
+    e_y: np.ndarray,
+    e_psi: np.ndarray,
+    sol: np.ndarray,
+    prof: Any,
+    kappa_line: np.ndarray,
+    line_length: float,
+    track: Any,
+    options: Any,
+) -> Trajectory:
+    """The curvature plan as a Trajectory: the QP's line driven at its full speed profile.
+
+    The yaw rate is the line's at that speed, v kappa_line; v_y and delta are the QP's.
+    """
+    x, y, _ = grid.line_xy(e_y, e_psi)
+    v = prof.v
+    ds_line = np.diff(np.append(prof.s, line_length))
+    dt = 2.0 * ds_line / (v + np.roll(v, -1))
+    return Trajectory.from_states(
+        x,
+        y,
+        vx=v,
+        vy=sol[:, 0],
+        r=v * kappa_line,
+        ax=prof.a_x,
+        delta=sol[:, 4],
+        dt=dt,
+        track=track,
+        method="curvature",
+        model_options=options,
+    )

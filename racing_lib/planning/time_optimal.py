@@ -1,0 +1,562 @@
+"""Stage two of the two-stage planner: the minimum-lap-time NLP (taught in notebook 03).
+
+The lap time is written as an integral over the centerline's arc length (paper, Eq. TimeObj2),
+``T = int (1 - kappa e_y) / (v_x cos e_psi - v_y sin e_psi) ds``, and minimized over the states
+xi = (v_x, v_y, r, e_psi, e_y) and inputs u = (delta, a_x) at N nodes of the centerline, subject to
+the spatial-domain model of :mod:`racing_lib.model` (:func:`racing_lib.model.spatial_dynamics`),
+for a flying lap (the state at the end of the lap equals the state at its start).
+
+Formulation choices, from the measurements in MEASURED.md:
+
+* **Trapezoidal collocation**: ``xi_{k+1} - xi_k = ds_k / 2 (f(xi_k, u_k) + f(xi_{k+1}, u_{k+1}))``
+  with inputs linear between nodes. It is A-stable (explicit steps of 3-5 m are not, at hairpin
+  speeds), cheap to build, and converged from a cold start as fast as from a warm one.
+* **Tires below their peak**: |alpha_f|, |alpha_r| <= the slip angle of the Pacejka peak
+  (:meth:`racing_lib.model.ModelParams.peak_slip_angle`). Past the peak the optimum is degenerate
+  and IPOPT needs several times more iterations.
+* **Everything scaled to order one**: each variable is divided by a typical magnitude and each
+  dynamics defect by the scale of its state; the objective by a reference lap time.
+* **Exact Hessian** (CasADi's algorithmic differentiation of an SX graph).
+* **Combined slip**: the tire acceleration a_x and the lateral acceleration a_y share the friction
+  ellipse ``(a_x / (mu g))^2 + (a_y / (mu g))^2 <= 1`` (``friction_ellipse``); the model's lateral
+  tire forces do not know about braking, the simulated car's tires do.
+* **State-dependent a_x limits** (paper, Appendix C): a_x between the pedal map's value at full
+  brake and at full throttle. Our pedal map is affine in the state, so by default
+  (``pedal_limits="exact"``) they are imposed exactly as linear constraints ``-m_brk <= a_x - (m_0
+  + m_xi . xi) <= m_thr`` and one solve suffices. ``"iterate"`` is the paper's scheme, for maps
+  that are not affine: bounds evaluated on the last solution, re-solved until they settle (at most
+  ``max_outer`` solves). On Norisring (574 nodes) "exact" took 25 IPOPT iterations; "iterate" took
+  3-4 solves of 40-75 iterations each, because every re-solve restarts IPOPT's barrier.
+
+The CasADi problem is built once per (track grid, parameters, options, settings) and kept in a small
+cache; building costs seconds, more than a warm solve.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from collections import OrderedDict
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from racing_lib.errors import PlanningError
+from racing_lib.planning.curvature import (
+    DEFAULT_CAR_WIDTH,
+    CurvatureResult,
+    CurvatureSettings,
+    TrackGrid,
+    solve_curvature,
+    steady_cornering,
+)
+from racing_lib.planning.speed import speed_profile
+from racing_lib.planning.trajectory import Trajectory, default_model_inputs
+
+# Variables per node, in this order, with their typical magnitudes (for scaling).
+_VARS = ("VX", "VY", "R", "EPSI", "EY", "DELTA", "AX")
+_SCALE = np.array([30.0, 1.0, 0.5, 0.2, 5.0, 0.1, 5.0])
+_NXS = 5  # states in the NLP (s is the grid itself)
+
+
+@dataclass(frozen=True)
+class TimeOptimalSettings:
+    """Settings of the minimum-lap-time NLP.
+
+    Attributes
+    ----------
+    spacing : float
+        Node spacing along the centerline, m.
+    w_ddelta : float
+        Weight of the steering-rate regularization ``sum_k ((delta_{k+1} - delta_k) / ds_k)^2 ds_k``
+        (rad^2/m), in seconds per rad^2/m.
+    max_iter : int
+        IPOPT iteration limit per solve.
+    tol : float
+        IPOPT convergence tolerance (on the scaled problem).
+    car_width : float
+        Body width, m.
+    margin : float or None
+        Clearance to the track edge, m (None: 0.5 with walls, 0.3 open).
+    delta_max : float
+        Steering angle bound, rad.
+    v_min : float
+        Lower bound on v_x, m/s (keeps the lap-time integrand finite).
+    e_psi_max : float
+        Bound on the heading error to the centerline, rad.
+    slip_limit : bool
+        Bound the slip angles by the Pacejka peak.
+    friction_ellipse : bool
+        Couple a_x and a_y through the friction ellipse.
+    pedal_limits : {"iterate", "exact"}
+        How the state-dependent a_x limits are imposed (see the module docstring).
+    max_outer : int
+        Maximum number of solves with updated a_x limits ("iterate").
+    outer_tol : float
+        The a_x limits have settled when they move less than this, m/s^2.
+    v_top : float or None
+        Top speed (upper bound on v_x), m/s (None: 190 km/h).
+    print_level : int
+        IPOPT's print level (0 silent).
+    ipopt_options : tuple of (name, value)
+        Extra IPOPT options, e.g. ``(("mu_init", 1e-3),)`` (a tuple so the settings stay hashable).
+    """
+
+    spacing: float = 3.0
+    w_ddelta: float = 1.0
+    max_iter: int = 1000
+    tol: float = 1e-6
+    car_width: float = DEFAULT_CAR_WIDTH
+    margin: float | None = None
+    delta_max: float = 0.5
+    v_min: float = 3.0
+    e_psi_max: float = 1.0
+    slip_limit: bool = True
+    friction_ellipse: bool = True
+    pedal_limits: str = "exact"
+    max_outer: int = 4
+    outer_tol: float = 0.05
+    v_top: float | None = None
+    print_level: int = 0
+    ipopt_options: tuple[tuple[str, Any], ...] = ()
+
+
+@dataclass
+class TimeOptimalResult:
+    """Result of :func:`solve_time_optimal`.
+
+    Attributes
+    ----------
+    success : bool
+        IPOPT converged (``Solve_Succeeded`` or ``Solved_To_Acceptable_Level``) in the last solve
+        and the a_x limits settled.
+    status : str
+        IPOPT's ``return_status`` of the last solve.
+    iterations : int
+        IPOPT iterations, summed over the outer solves.
+    solve_time : float
+        Wall time of the solves, s.
+    build_time : float
+        Wall time to build the CasADi problem (0 when it came from the cache), s.
+    outer_iterations : int
+        Number of solves with updated a_x limits.
+    trajectory : Trajectory or None
+        The plan (None only when no solve produced finite numbers).
+    lap_time : float
+        Planned lap time, s.
+    start : str
+        ``'warm'`` (from the curvature plan), ``'cold'`` (centerline at 10 m/s) or ``'given'``.
+    iterations_per_solve : list of int
+        IPOPT iterations of each outer solve.
+    grid : TrackGrid
+        The planning grid.
+    solution : dict
+        Arrays on the grid: v_x, v_y, r, e_psi, e_y, delta, a_x, dt (the interval times).
+    """
+
+    success: bool
+    status: str
+    iterations: int
+    solve_time: float
+    build_time: float
+    outer_iterations: int
+    trajectory: Trajectory | None
+    lap_time: float
+    start: str
+    iterations_per_solve: list[int] = field(default_factory=list)
+    grid: TrackGrid | None = None
+    solution: dict[str, np.ndarray] = field(default_factory=dict)
+
+
+class _Problem:
+    """The built NLP for one grid, parameter set, options and settings."""
+
+    def __init__(self, grid: TrackGrid, params: Any, options: Any, st: TimeOptimalSettings) -> None:
+        import casadi as ca
+
+        from racing_lib.model import X, model_terms, spatial_dynamics
+
+        t0 = time.perf_counter()
+        n = grid.n
+        self.n = n
+        self.grid = grid
+        self.params = params
+        self.settings = st
+        g = float(params.g)
+        scale = ca.DM(_SCALE)
+        W = ca.SX.sym("w", len(_VARS), n)  # scaled variables, one column per node
+        Z = ca.diag(scale) @ W
+        xi = ca.vertcat(Z[0:_NXS, :], ca.DM(grid.s).T)  # model order: vx vy r epsi ey s
+        assert [int(X.VX), int(X.VY), int(X.R), int(X.EPSI), int(X.EY), int(X.S)] == list(range(6))
+        u = Z[_NXS:, :]
+        kap = ca.DM(grid.kappa).T
+        th = ca.DM(grid.theta).T
+        f = spatial_dynamics(params, options).map(n)(xi, u, kap, th)[0:_NXS, :]
+        terms_fn = model_terms(params, options).map(n)
+        terms = dict(zip(terms_fn.name_out(), terms_fn(xi, u, kap, th), strict=True))
+        nxt = list(range(1, n)) + [0]
+        h = ca.DM(grid.ds).T
+        xs = Z[0:_NXS, :]
+        # Trapezoidal collocation defects, each divided by the scale of its state.
+        defect = xs[:, nxt] - xs - 0.5 * ca.repmat(h, _NXS, 1) * (f + f[:, nxt])
+        defect = ca.diag(1.0 / scale[0:_NXS]) @ defect
+        g_list = [ca.vec(defect)]
+        lbg = [np.zeros(_NXS * n)]
+        ubg = [np.zeros(_NXS * n)]
+        if st.slip_limit:
+            a_f, a_r = params.peak_slip_angle()
+            g_list += [ca.vec(terms["alpha_f"]) / a_f, ca.vec(terms["alpha_r"]) / a_r]
+            lbg += [-np.ones(n), -np.ones(n)]
+            ubg += [np.ones(n), np.ones(n)]
+        if st.friction_ellipse:
+            grip = params.mu * g
+            a_x = Z[_VARS.index("AX"), :]
+            use = (a_x / grip) ** 2 + (terms["a_y"] / grip) ** 2
+            g_list.append(ca.vec(use))
+            lbg.append(np.full(n, -np.inf))
+            ubg.append(np.ones(n))
+        if st.pedal_limits == "exact":
+            pedal = params.pedal
+            base = pedal.m_0 + ca.mtimes(ca.DM(pedal.m_xi).T, xi)
+            excess = Z[_VARS.index("AX"), :] - base
+            g_list.append(ca.vec(excess) / 5.0)
+            lbg.append(np.full(n, -pedal.m_brk / 5.0))
+            ubg.append(np.full(n, pedal.m_thr / 5.0))
+        elif st.pedal_limits != "iterate":
+            raise PlanningError(
+                f"unknown pedal_limits {st.pedal_limits!r}; use 'iterate' or 'exact'."
+            )
+        # Objective: lap time (trapezoid in 1/s_dot) + steering-rate regularization, over T_ref.
+        w_node = 0.5 * (grid.ds + np.roll(grid.ds, 1))
+        lap = ca.sum2(ca.DM(w_node).T / terms["s_dot"])
+        dd = Z[_VARS.index("DELTA"), nxt] - Z[_VARS.index("DELTA"), :]
+        reg = ca.sum2(dd**2 / h)
+        self.t_ref = float(grid.length / 20.0)
+        obj = (lap + st.w_ddelta * reg) / self.t_ref
+        nlp = {"x": ca.vec(W), "f": obj, "g": ca.vertcat(*g_list)}
+        ipopt = {
+            "print_level": st.print_level,
+            "max_iter": st.max_iter,
+            "tol": st.tol,
+            "hessian_approximation": "exact",
+            "mu_strategy": "adaptive",
+            "sb": "yes",
+        }
+        ipopt.update(dict(st.ipopt_options))
+        self.solver = ca.nlpsol("time_optimal", "ipopt", nlp, {"ipopt": ipopt, "print_time": False})
+        self.lbg = np.concatenate(lbg)
+        self.ubg = np.concatenate(ubg)
+        self.lap_fn = ca.Function("lap", [ca.vec(W)], [lap, terms["s_dot"]])
+        self.terms_fn = ca.Function(
+            "terms", [ca.vec(W)], [terms["alpha_f"], terms["alpha_r"], terms["a_y"]]
+        )
+        self.build_time = time.perf_counter() - t0
+
+    def bounds(self, ax_lo: np.ndarray, ax_hi: np.ndarray, v_top: float) -> tuple[Any, Any]:
+        st = self.settings
+        n = self.n
+        lo = np.empty((len(_VARS), n))
+        hi = np.empty((len(_VARS), n))
+        rows = {name: i for i, name in enumerate(_VARS)}
+        big = 1e3
+        lo[rows["VX"]], hi[rows["VX"]] = st.v_min, v_top
+        lo[rows["VY"]], hi[rows["VY"]] = -big, big
+        lo[rows["R"]], hi[rows["R"]] = -big, big
+        lo[rows["EPSI"]], hi[rows["EPSI"]] = -st.e_psi_max, st.e_psi_max
+        lo[rows["EY"]], hi[rows["EY"]] = self.grid.ey_min, self.grid.ey_max
+        lo[rows["DELTA"]], hi[rows["DELTA"]] = -st.delta_max, st.delta_max
+        lo[rows["AX"]], hi[rows["AX"]] = ax_lo, ax_hi
+        s = _SCALE[:, None]
+        return (lo / s).ravel(order="F"), (hi / s).ravel(order="F")
+
+
+# Built problems, keyed by what determines them; a few entries only (each holds a compiled NLP).
+_CACHE: OrderedDict[tuple[Any, ...], _Problem] = OrderedDict()
+_CACHE_SIZE = 4
+
+
+def _problem(grid: TrackGrid, track: Any, params: Any, options: Any, st: TimeOptimalSettings):
+    key = (
+        track.checksum() if hasattr(track, "checksum") else id(track),
+        grid.n,
+        float(grid.ey_min.sum()),
+        float(grid.ey_max.sum()),
+        params,
+        options,
+        dataclasses.replace(st, max_outer=0, outer_tol=0.0, v_top=None),
+    )
+    prob = _CACHE.get(key)
+    if prob is not None:
+        _CACHE.move_to_end(key)
+        return prob, 0.0
+    prob = _Problem(grid, params, options, st)
+    _CACHE[key] = prob
+    while len(_CACHE) > _CACHE_SIZE:
+        _CACHE.popitem(last=False)
+    return prob, prob.build_time
+
+
+def clear_cache() -> None:
+    """Forget the built NLPs (they are rebuilt on the next solve)."""
+    _CACHE.clear()
+
+
+def _initial_guess(
+    grid: TrackGrid, params: Any, start: Any, cold_speed: float
+) -> tuple[np.ndarray, str]:
+    """Initial values (7, N) in physical units, and the kind of start."""
+    n = grid.n
+    z = np.zeros((len(_VARS), n))
+    rows = {name: i for i, name in enumerate(_VARS)}
+    if isinstance(start, CurvatureResult):
+        src = start
+        same = src.grid is not None and src.grid.n == n
+        sq = grid.s
+        period = grid.length
+
+        def get(a: np.ndarray) -> np.ndarray:
+            if same:
+                return np.asarray(a, float)
+            return np.interp(sq, src.grid.s, a, period=period)
+
+        z[rows["VX"]] = get(src.v_x)
+        z[rows["EY"]] = get(src.e_y)
+        z[rows["EPSI"]] = get(src.e_psi)
+        z[rows["DELTA"]] = get(src.delta)
+        z[rows["AX"]] = get(src.a_x)
+        z[rows["VY"]] = get(src.v_y)
+        # The QP's yaw rate belongs to its reduced speed v_hat: use the line's at full speed.
+        z[rows["R"]] = get(src.trajectory.r)
+        kind = "warm"
+    elif start == "cold":
+        v = np.full(n, cold_speed)
+        vy, r, delta = steady_cornering(v, grid.kappa, params)
+        z[rows["VX"]] = v
+        z[rows["VY"]] = vy
+        z[rows["R"]] = r
+        z[rows["DELTA"]] = delta
+        kind = "cold"
+    else:
+        raise PlanningError(f"unknown start {start!r}: pass 'warm', 'cold' or a CurvatureResult.")
+    z[rows["VX"]] = np.maximum(z[rows["VX"]], 1.0)
+    return z, kind
+
+
+def solve_time_optimal(
+    track: Any,
+    params: Any = None,
+    options: Any = None,
+    settings: TimeOptimalSettings | None = None,
+    *,
+    start: Any = "warm",
+    curvature_settings: CurvatureSettings | None = None,
+    cold_speed: float = 10.0,
+    raise_on_failure: bool = True,
+) -> TimeOptimalResult:
+    """Plan a minimum-lap-time flying lap.
+
+    Parameters
+    ----------
+    track : Track
+        The track; its centerline is the Frenet reference of the NLP.
+    params : ModelParams, optional
+        Planning model parameters (default ``ModelParams()``).
+    options : ModelOptions, optional
+        Model effects (default ``ModelOptions()``); any ablation plans through this same code.
+    settings : TimeOptimalSettings, optional
+        Grid, weights and solver settings.
+    start : {'warm', 'cold'} or CurvatureResult
+        ``'warm'``: solve the curvature QP first (same grid and options) and start from it;
+        ``'cold'``: start from the centerline at ``cold_speed``; or pass a curvature result.
+    curvature_settings : CurvatureSettings, optional
+        Settings for the warm-start QP (its spacing is set to the NLP's).
+    cold_speed : float
+        Speed of the cold start, m/s.
+    raise_on_failure : bool
+        Raise :class:`PlanningError` if IPOPT fails (default). With False a failed solve is returned
+        with ``success=False`` and IPOPT's status (used for the warm-vs-cold experiment).
+
+    Returns
+    -------
+    TimeOptimalResult
+
+    Raises
+    ------
+    PlanningError
+        IPOPT failed (message with its return status and what to try), the track is narrower than
+        the car, or the friction is too low for the planner's minimum speed.
+
+    Examples
+    --------
+    >>> from racing_lib.track import load_track
+    >>> res = solve_time_optimal(load_track("expressway"))  # doctest: +SKIP
+    >>> res.status, res.iterations, round(res.lap_time, 2)  # doctest: +SKIP
+    """
+    st = settings or TimeOptimalSettings()
+    params, _, options = default_model_inputs(params, None, options)
+    v_top = float(st.v_top) if st.v_top is not None else 190.0 / 3.6
+    grid = TrackGrid.from_track(track, st.spacing, st.car_width, st.margin)
+
+    # Cheap feasibility checks before any solver runs.
+    prof = speed_profile(
+        grid.s, grid.kappa, params, None, grid.theta, v_top, options, length=grid.length
+    )
+    if float(np.min(prof.v)) < st.v_min:
+        k = int(np.argmin(prof.v))
+        raise PlanningError(
+            f"friction too low for track {getattr(track, 'name', '?')!r}: with mu = {params.mu} "
+            "the "
+            f"fastest speed through the corner at s = {grid.s[k]:.0f} m is {prof.v[k]:.2f} m/s, "
+            f"below the planner's minimum speed v_min = {st.v_min} m/s. Check the friction "
+            "coefficient (dry asphalt: about 1.0-1.3) or lower v_min."
+        )
+
+    if isinstance(start, str) and start == "warm":
+        cs = curvature_settings or CurvatureSettings()
+        cs = dataclasses.replace(
+            cs, spacing=st.spacing, car_width=st.car_width, margin=st.margin, v_top=st.v_top
+        )
+        start = solve_curvature(track, params, options, cs, grid=grid)
+    z0, kind = _initial_guess(grid, params, start, cold_speed)
+
+    prob, build_time = _problem(grid, track, params, options, st)
+    pedal = params.pedal
+    rows = {name: i for i, name in enumerate(_VARS)}
+    grip = params.mu * params.g
+
+    def ax_limits(z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        if st.pedal_limits == "exact":
+            return np.full(grid.n, -grip), np.full(grid.n, grip)
+        xi = np.zeros((grid.n, 6))
+        xi[:, :_NXS] = z[:_NXS].T
+        xi[:, 5] = grid.s
+        lo, hi = pedal.limits(xi)
+        lo = np.maximum(np.asarray(lo, float), -grip)
+        hi = np.minimum(np.asarray(hi, float), grip)
+        return lo, np.maximum(hi, lo + 1e-3)
+
+    x0 = (z0 / _SCALE[:, None]).ravel(order="F")
+    lo_prev, hi_prev = ax_limits(z0)
+    iters: list[int] = []
+    status = "not_run"
+    success = False
+    z = z0
+    solve_time = 0.0
+    outer = 0
+    settled = False
+    for outer in range(1, max(1, st.max_outer) + 1):  # noqa: B007 - reported
+        lbx, ubx = prob.bounds(lo_prev, hi_prev, v_top)
+        x0 = np.clip(x0, lbx, ubx)
+        t0 = time.perf_counter()
+        sol = prob.solver(x0=x0, lbx=lbx, ubx=ubx, lbg=prob.lbg, ubg=prob.ubg)
+        solve_time += time.perf_counter() - t0
+        stats = prob.solver.stats()
+        status = str(stats.get("return_status", "unknown"))
+        iters.append(int(stats.get("iter_count", -1)))
+        success = status in ("Solve_Succeeded", "Solved_To_Acceptable_Level")
+        x_opt = np.asarray(sol["x"], float).ravel()
+        if not np.all(np.isfinite(x_opt)):
+            success = False
+            break
+        z = x_opt.reshape(len(_VARS), grid.n, order="F") * _SCALE[:, None]
+        if not success:
+            break
+        x0 = x_opt
+        lo_new, hi_new = ax_limits(z)
+        change = max(np.max(np.abs(lo_new - lo_prev)), np.max(np.abs(hi_new - hi_prev)))
+        lo_prev, hi_prev = lo_new, hi_new
+        if change < st.outer_tol:
+            settled = True
+            break
+    if success and not settled and st.pedal_limits == "iterate":
+        # The last solve used limits from the solve before it; accept if the plan respects them.
+        a = z[rows["AX"]]
+        slack = 0.2  # m/s^2
+        settled = bool(np.all(a >= lo_prev - slack) and np.all(a <= hi_prev + slack))
+        success = settled
+        if not settled:
+            status = f"{status} (a_x limits not settled after {outer} solves)"
+
+    if not success and raise_on_failure:
+        raise PlanningError(
+            f"time-optimal NLP on track {getattr(track, 'name', '?')!r}: IPOPT returned "
+            f"'{status}' after {sum(iters)} iterations ({kind} start). Try: warm start from the "
+            "curvature plan (start='warm'), increase max_iter, check the friction coefficient and "
+            "the pedal map, or use a finer grid (smaller spacing)."
+        )
+    traj = None
+    lap_time = float("nan")
+    solution: dict[str, np.ndarray] = {}
+    if np.all(np.isfinite(z)):
+        lap, s_dot = prob.lap_fn((z / _SCALE[:, None]).ravel(order="F"))
+        s_dot = np.asarray(s_dot, float).ravel()
+        dt = 0.5 * grid.ds * (1.0 / s_dot + 1.0 / np.roll(s_dot, -1))
+        lap_time = float(np.sum(dt))
+        solution = {name.lower(): z[i].copy() for i, name in enumerate(_VARS)}
+        solution["dt"] = dt
+        solution["s_dot"] = s_dot
+        if np.all(s_dot > 0):
+            try:
+                traj = _trajectory(grid, z, dt, track, options, status, iters)
+            except PlanningError:
+                if success:
+                    raise
+    return TimeOptimalResult(
+        success=success,
+        status=status,
+        iterations=int(sum(iters)),
+        solve_time=solve_time,
+        build_time=build_time,
+        outer_iterations=outer,
+        trajectory=traj,
+        lap_time=lap_time,
+        start=kind,
+        iterations_per_solve=iters,
+        grid=grid,
+        solution=solution,
+    )
+
+
+def _trajectory(
+    grid: TrackGrid,
+    z: np.ndarray,
+    dt: np.ndarray,
+    track: Any,
+    options: Any,
+    status: str,
+    iters: list[int],
+) -> Trajectory:
+    rows = {name: i for i, name in enumerate(_VARS)}
+    x, y, _ = grid.line_xy(z[rows["EY"]], z[rows["EPSI"]])
+    return Trajectory.from_states(
+        x,
+        y,
+        vx=z[rows["VX"]],
+        vy=z[rows["VY"]],
+        r=z[rows["R"]],
+        ax=z[rows["AX"]],
+        delta=z[rows["DELTA"]],
+        dt=dt,
+        track=track,
+        method="time-optimal",
+        model_options=options,
+        info={"ipopt_status": status, "ipopt_iterations": iters},
+    )
+
+
+def lap_time_with_model(
+    grid: TrackGrid, v_x: np.ndarray, v_y: np.ndarray, e_psi: np.ndarray, e_y: np.ndarray
+) -> float:
+    """Lap time (s) of states on the grid with the NLP's formula (trapezoid in 1 / s_dot)."""
+    s_dot = (v_x * np.cos(e_psi) - v_y * np.sin(e_psi)) / (1.0 - grid.kappa * e_y)
+    return float(np.sum(0.5 * grid.ds * (1.0 / s_dot + 1.0 / np.roll(s_dot, -1))))
+
+
+__all__ = [
+    "TimeOptimalResult",
+    "TimeOptimalSettings",
+    "clear_cache",
+    "lap_time_with_model",
+    "solve_time_optimal",
+]

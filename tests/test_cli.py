@@ -1,0 +1,71 @@
+"""The racing-lib command: JSON output, human output, and one-line errors."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from racing_lib.cli import main
+
+
+def test_tracks_json_lists_the_builtin_tracks(capsys):
+    assert main(["tracks", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    names = {t["name"]: t for t in out["tracks"]}
+    assert set(names) == {"expressway", "shortcut"}
+    assert 4300 < names["expressway"]["length_m"] < 4500
+    assert names["expressway"]["boundary"] == "walls"
+    assert names["shortcut"]["boundary"] == "open"
+
+
+def test_tracks_human_output_is_a_table(capsys):
+    assert main(["tracks"]) == 0
+    out = capsys.readouterr().out
+    assert "expressway" in out and "walls" in out
+
+
+def test_lap_nominal_centerline_prints_exactly_one_json_object(capsys, tmp_path):
+    code = main(
+        ["lap", "--controller", "nominal", "--method", "centerline", "--json",
+         "--out", str(tmp_path)]
+    )  # fmt: skip
+    captured = capsys.readouterr()
+    report = json.loads(captured.out)  # the whole of stdout is one JSON object
+    assert code == 0
+    assert report["track"] == "expressway"
+    assert report["controller"] == "nominal"
+    trial = report["trials"][0]
+    expected = {
+        "seed", "completed", "lap_time_s", "vx_mae_mps", "vx_max_err_mps", "ey_mae_m", "ey_max_m",
+        "wall_contacts", "wall_contact_time_s", "offtrack_time_s", "solve_time_ms_median",
+        "solve_time_ms_p99",
+    }  # fmt: skip
+    assert expected <= set(trial)
+    assert trial["completed"] and trial["wall_contacts"] == 0
+    assert report["summary"]["completed"] == 1
+    # The nominal controller keeps within 3 % of its (moderate) reference lap time.
+    assert report["summary"]["lap_time_mean_s"] == pytest.approx(
+        report["planned_lap_time_s"], rel=0.03
+    )
+    for name in ("track.png", "profiles.png", "summary.json", "plan.csv", "log_seed0.npz"):
+        assert (tmp_path / name).exists(), name
+
+
+def test_unknown_track_is_one_clear_error(capsys):
+    assert main(["tracks"]) == 0
+    capsys.readouterr()
+    code = main(["lap", "--track", "nurburgring", "--controller", "nominal", "--json"])
+    err = capsys.readouterr().err
+    assert code == 2
+    assert err.startswith("error:") and "expressway" in err
+    assert "Traceback" not in err
+
+
+def test_a_broken_csv_is_one_clear_error(capsys, tmp_path):
+    bad = tmp_path / "bad.csv"
+    bad.write_text("# x_m,y_m,w_tr_right_m,w_tr_left_m\n0,0,5,5\n10,0,5,nan\n10,10,5,5\n0,10,5,5\n")
+    code = main(["lap", "--track", str(bad), "--controller", "nominal", "--method", "centerline"])
+    err = capsys.readouterr().err
+    assert code == 2
+    assert "bad.csv" in err and "Traceback" not in err

@@ -1,0 +1,159 @@
+"""Tests of the minimum-lap-time NLP on a small oval (and one slow run on the expressway)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from racing_lib.errors import PlanningError
+from racing_lib.model import ModelOptions, ModelParams, discretize
+from racing_lib.planning.curvature import CurvatureSettings, solve_curvature
+from racing_lib.planning.time_optimal import (
+    TimeOptimalSettings,
+    lap_time_with_model,
+    solve_time_optimal,
+)
+from racing_lib.tracks.segments import Arc, Straight, track_from_segments
+
+SETTINGS = TimeOptimalSettings(spacing=2.5)
+PARAMS = ModelParams()
+OPTIONS = ModelOptions()
+
+
+@pytest.fixture(scope="module")
+def oval():
+    layout = [Straight(200), Arc(50, math.pi), Straight(120), Arc(30, math.pi), Straight(30)]
+    return track_from_segments(layout, width=12.0, name="oval", transition=20.0)
+
+
+@pytest.fixture(scope="module")
+def qp(oval):
+    return solve_curvature(oval, PARAMS, OPTIONS, CurvatureSettings(spacing=2.5))
+
+
+@pytest.fixture(scope="module")
+def nlp(oval, qp):
+    return solve_time_optimal(oval, PARAMS, OPTIONS, SETTINGS, start=qp)
+
+
+def test_nlp_converges(nlp):
+    assert nlp.success, nlp.status
+    assert nlp.status == "Solve_Succeeded"
+    assert nlp.iterations > 0 and nlp.solve_time > 0
+    assert nlp.trajectory is not None and nlp.trajectory.method == "time-optimal"
+    assert nlp.trajectory.lap_time == pytest.approx(nlp.lap_time)
+
+
+def test_nlp_satisfies_the_model_between_nodes(oval, nlp):
+    # Re-integrate every interval with the model's own RK4 step (8 sub-steps, inputs linear in s
+    # as in the collocation, the centerline's exact curvature) and compare with the next node.
+    sol, grid = nlp.solution, nlp.grid
+    F = discretize(PARAMS, OPTIONS, None, "rk4", "spatial")
+    states = np.vstack([sol["vx"], sol["vy"], sol["r"], sol["epsi"], sol["ey"], grid.s])
+    inputs = np.vstack([sol["delta"], sol["ax"]])
+    n, sub = grid.n, 8
+    errors = np.zeros((5, n))
+    for k in range(n):
+        k1 = (k + 1) % n
+        h = grid.ds[k] / sub
+        xi = states[:, k].copy()
+        for j in range(sub):
+            frac = (j + 0.5) / sub
+            u = (1 - frac) * inputs[:, k] + frac * inputs[:, k1]
+            s_mid = grid.s[k] + (j + 0.5) * h
+            kappa = float(oval.centerline.curvature(s_mid))
+            theta = float(oval.grade(s_mid))
+            xi = np.asarray(F(xi, u, kappa, theta, h)).ravel()
+        errors[:, k] = np.abs(xi[:5] - states[:5, k1])
+    # Tolerances per 2.5 m interval: 0.03 m/s on v_x, 0.1 m/s on v_y, 0.03 rad/s on r, 0.01 rad
+    # on e_psi, 0.02 m on e_y. Trapezoidal collocation is second order in the node spacing: at 5 m
+    # the worst v_y error is about 0.27 m/s (fast lateral modes at corner entry), at 2.5 m 0.05.
+    tol = np.array([0.03, 0.1, 0.03, 0.01, 0.02])
+    worst = errors.max(axis=1)
+    assert np.all(worst < tol), worst
+
+
+def test_nlp_stays_inside_the_track_and_respects_the_limits(oval, nlp):
+    sol, grid = nlp.solution, nlp.grid
+    assert np.all(sol["ey"] <= grid.ey_max + 1e-6)
+    assert np.all(sol["ey"] >= grid.ey_min - 1e-6)
+    half = 0.5 * SETTINGS.car_width
+    assert np.all(sol["ey"] + half < oval.width_left(grid.s))
+    assert np.all(-sol["ey"] + half < oval.width_right(grid.s))
+    xi = np.column_stack([sol["vx"], sol["vy"], sol["r"], sol["epsi"], sol["ey"], grid.s])
+    lo, hi = PARAMS.pedal.limits(xi)
+    assert np.all(sol["ax"] >= lo - 1e-4) and np.all(sol["ax"] <= hi + 1e-4)
+    a_f, a_r = PARAMS.peak_slip_angle()
+    from racing_lib.model import Model
+
+    terms = Model(PARAMS, OPTIONS).terms(
+        xi, np.column_stack([sol["delta"], sol["ax"]]), grid.kappa, grid.theta
+    )
+    assert np.all(np.abs(terms["alpha_f"]) <= a_f + 1e-4)
+    assert np.all(np.abs(terms["alpha_r"]) <= a_r + 1e-4)
+
+
+def test_nlp_is_faster_than_the_curvature_plan(qp, nlp):
+    # The curvature plan's lap time with the same time formula: its line at its speed profile.
+    t_qp = lap_time_with_model(qp.grid, qp.v_x, qp.v_y, qp.e_psi, qp.e_y)
+    assert nlp.lap_time < t_qp - 0.2
+
+
+def test_removing_drag_makes_the_plan_faster(oval, nlp):
+    no_drag = solve_time_optimal(oval, PARAMS, ModelOptions(drag=False), SETTINGS, start="cold")
+    assert no_drag.success, no_drag.status
+    assert no_drag.lap_time < nlp.lap_time - 0.05
+
+
+def test_cold_start_reaches_the_same_optimum(oval, nlp):
+    cold = solve_time_optimal(oval, PARAMS, OPTIONS, SETTINGS, start="cold")
+    assert cold.success, cold.status
+    assert cold.start == "cold"
+    assert cold.lap_time == pytest.approx(nlp.lap_time, abs=0.05)
+    assert cold.build_time == 0.0  # the built problem came from the cache
+
+
+def test_paper_pedal_limit_iteration_agrees_with_exact_limits(oval, nlp):
+    # The paper re-evaluates the state-dependent a_x limits on the last solution and re-solves;
+    # with an affine pedal map the exact linear constraints must give the same plan.
+    settings = TimeOptimalSettings(spacing=2.5, pedal_limits="iterate")
+    res = solve_time_optimal(oval, PARAMS, OPTIONS, settings, start="cold")
+    assert res.success, res.status
+    assert 2 <= res.outer_iterations <= settings.max_outer
+    assert len(res.iterations_per_solve) == res.outer_iterations
+    assert res.lap_time == pytest.approx(nlp.lap_time, abs=0.05)
+
+
+def test_ipopt_failure_names_the_solver_and_status(oval):
+    short = TimeOptimalSettings(spacing=2.5, max_iter=3)
+    with pytest.raises(PlanningError) as err:
+        solve_time_optimal(oval, PARAMS, OPTIONS, short, start="cold")
+    msg = str(err.value)
+    assert "IPOPT" in msg and "Maximum_Iterations_Exceeded" in msg
+    assert "warm start" in msg
+    failed = solve_time_optimal(oval, PARAMS, OPTIONS, short, start="cold", raise_on_failure=False)
+    assert not failed.success
+    assert failed.status == "Maximum_Iterations_Exceeded"
+
+
+def test_friction_too_low_is_refused_before_solving(oval):
+    with pytest.raises(PlanningError, match="friction too low"):
+        solve_time_optimal(oval, ModelParams(mu=0.02), OPTIONS, SETTINGS, start="cold")
+
+
+def test_track_narrower_than_the_car_is_refused():
+    layout = [Straight(100), Arc(40, math.pi), Straight(100), Arc(40, math.pi)]
+    narrow = track_from_segments(layout, width=2.5, name="lane")
+    with pytest.raises(PlanningError, match="too narrow"):
+        solve_time_optimal(narrow, PARAMS, OPTIONS, SETTINGS, start="cold")
+
+
+@pytest.mark.slow
+def test_expressway_cold_start():
+    from racing_lib.track import load_track
+
+    res = solve_time_optimal(load_track("expressway"), start="cold")
+    assert res.success, res.status
+    assert 85.0 < res.lap_time < 105.0

@@ -1,0 +1,111 @@
+"""Tests of Trajectory: the centerline plan, interpolation and the plan CSV file."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from racing_lib.errors import PlanningError
+from racing_lib.model import ModelOptions, ModelParams
+from racing_lib.planning.trajectory import PLAN_COLUMNS, Trajectory
+from racing_lib.tracks import circle_track
+
+G = 9.81
+
+
+@pytest.fixture(scope="module")
+def circle_plan():
+    track = circle_track(radius=80.0, width=10.0, name="circle80")
+    traj = Trajectory.from_centerline(
+        track, ModelParams(c_rr=0.0), options=ModelOptions(drag=False), spacing=4.0
+    )
+    return track, traj
+
+
+def test_centerline_plan_on_a_circle(circle_plan):
+    track, traj = circle_plan
+    v = math.sqrt(1.25 * G * 80.0)
+    assert traj.method == "centerline"
+    assert traj.track_name == "circle80"
+    assert traj.track_checksum == track.checksum()
+    np.testing.assert_allclose(traj.vx, v, rtol=1e-5)  # the spline circle is not exact
+    np.testing.assert_allclose(traj.kappa, 1 / 80.0, rtol=1e-3)
+    np.testing.assert_allclose(traj.r, v / 80.0, rtol=1e-3)
+    assert traj.path.length == pytest.approx(2 * math.pi * 80.0, rel=1e-4)
+    assert traj.lap_time == pytest.approx(2 * math.pi * 80.0 / v, rel=1e-4)
+    # t increases from 0 along the lap.
+    assert traj.t[0] == 0.0 and np.all(np.diff(traj.t) > 0)
+
+
+def test_interpolate_returns_node_values_and_wraps(circle_plan):
+    _, traj = circle_plan
+    k = 17
+    st = traj.interpolate(traj.s[k])
+    assert st.x == pytest.approx(traj.x[k])
+    assert st.vx == pytest.approx(traj.vx[k])
+    # One lap further is the same place; time continues between the last node and the lap end.
+    st2 = traj.interpolate(traj.s[k] + traj.length)
+    assert st2.y == pytest.approx(traj.y[k])
+    mid = traj.interpolate(0.5 * (traj.s[-1] + traj.length))
+    assert traj.t[-1] < mid.t < traj.lap_time
+    arr = traj.interpolate(np.array([0.0, 10.0]))
+    assert arr.x.shape == (2,)
+
+
+def test_plan_csv_round_trip(tmp_path, circle_plan):
+    track, traj = circle_plan
+    path = tmp_path / "plan.csv"
+    traj.save_csv(path)
+    text = path.read_text()
+    assert ",".join(PLAN_COLUMNS) in text
+    assert "# track: circle80" in text
+    assert not list(tmp_path.glob(".*tmp"))  # atomic write leaves no temporary file
+    back = Trajectory.load_csv(path, track=track)
+    for name in ("s", "x", "y", "psi", "kappa", "vx", "vy", "r", "ax", "delta", "t"):
+        np.testing.assert_allclose(getattr(back, name), getattr(traj, name), rtol=1e-8, atol=1e-8)
+    assert back.lap_time == pytest.approx(traj.lap_time, abs=1e-6)
+    assert back.method == "centerline"
+    assert back.model_options == {
+        "drag": False,
+        "longitudinal_weight_transfer": True,
+        "lateral_weight_transfer": False,
+    }
+
+
+def test_plan_for_another_track_is_refused(tmp_path, circle_plan):
+    _, traj = circle_plan
+    path = tmp_path / "plan.csv"
+    traj.save_csv(path)
+    other = circle_track(radius=90.0, width=10.0, name="circle90")
+    with pytest.raises(PlanningError) as err:
+        Trajectory.load_csv(path, track=other)
+    msg = str(err.value)
+    assert "circle80" in msg and "circle90" in msg
+    assert "racing-lib plan --track circle90" in msg
+
+
+def test_not_a_plan_file_is_refused(tmp_path):
+    bad = tmp_path / "bad.csv"
+    bad.write_text("# x_m,y_m\n1,2\n")
+    with pytest.raises(PlanningError, match="not a racing_lib plan"):
+        Trajectory.load_csv(bad)
+
+
+def test_inconsistent_arrays_are_refused(circle_plan):
+    _, traj = circle_plan
+    with pytest.raises(PlanningError, match="one value per node"):
+        Trajectory(
+            s=traj.s,
+            x=traj.x,
+            y=traj.y,
+            psi=traj.psi,
+            kappa=traj.kappa,
+            vx=traj.vx[:-1],
+            vy=traj.vy,
+            r=traj.r,
+            ax=traj.ax,
+            delta=traj.delta,
+            t=traj.t,
+        )
