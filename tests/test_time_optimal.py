@@ -126,6 +126,13 @@ def test_paper_pedal_limit_iteration_agrees_with_exact_limits(oval, nlp):
     assert res.lap_time == pytest.approx(nlp.lap_time, abs=0.05)
 
 
+def test_mx_graph_gives_the_same_plan(oval, nlp):
+    settings = TimeOptimalSettings(spacing=2.5, graph="mx")
+    res = solve_time_optimal(oval, PARAMS, OPTIONS, settings, start="cold")
+    assert res.success, res.status
+    assert res.lap_time == pytest.approx(nlp.lap_time, abs=0.01)
+
+
 def test_ipopt_failure_names_the_solver_and_status(oval):
     short = TimeOptimalSettings(spacing=2.5, max_iter=3)
     with pytest.raises(PlanningError) as err:
@@ -140,7 +147,11 @@ def test_ipopt_failure_names_the_solver_and_status(oval):
 
 def test_friction_too_low_is_refused_before_solving(oval):
     with pytest.raises(PlanningError, match="friction too low"):
-        solve_time_optimal(oval, ModelParams(mu=0.02), OPTIONS, SETTINGS, start="cold")
+        solve_time_optimal(oval, ModelParams(mu=0.05), OPTIONS, SETTINGS, start="cold")
+    # Allowed by mu_min but too slippery for the 30 m hairpin at the planner's minimum speed.
+    settings = TimeOptimalSettings(spacing=2.5, mu_min=0.0)
+    with pytest.raises(PlanningError, match="friction too low.*corner"):
+        solve_time_optimal(oval, ModelParams(mu=0.02), OPTIONS, settings, start="cold")
 
 
 def test_track_narrower_than_the_car_is_refused():

@@ -66,6 +66,7 @@ def test_plan_csv_round_trip(tmp_path, circle_plan):
     for name in ("s", "x", "y", "psi", "kappa", "vx", "vy", "r", "ax", "delta", "t"):
         np.testing.assert_allclose(getattr(back, name), getattr(traj, name), rtol=1e-8, atol=1e-8)
     assert back.lap_time == pytest.approx(traj.lap_time, abs=1e-6)
+    assert back.length == pytest.approx(traj.path.length, abs=1e-5)
     assert back.method == "centerline"
     assert back.model_options == {
         "drag": False,

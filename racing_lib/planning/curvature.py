@@ -489,7 +489,8 @@ def solve_curvature(
     Raises
     ------
     PlanningError
-        OSQP (via cvxpy) reports a QP infeasible or fails; the track is narrower than the car.
+        The QP solver (via cvxpy) reports a QP infeasible or fails; the track is narrower than
+        the car.
 
     Examples
     --------

@@ -61,6 +61,8 @@ class SpeedProfile:
         True when the periodic passes settled.
     iterations : int
         Number of wrap-around passes done.
+    length : float
+        Length of the closed path, m (NaN for an open path).
     """
 
     s: np.ndarray
@@ -70,10 +72,13 @@ class SpeedProfile:
     lap_time: float
     success: bool
     iterations: int = 1
+    length: float = float("nan")
 
     def __call__(self, s: ArrayLike) -> np.ndarray:
         """Speed at arc length ``s`` (m), linear interpolation, periodic on a closed path."""
-        length = self.s[-1] + (self.s[-1] - self.s[-2])
+        length = self.length
+        if not math.isfinite(length):
+            length = float(self.s[-1] + (self.s[-1] - self.s[-2]))
         return np.interp(np.asarray(s, dtype=float), self.s, self.v, period=length)
 
 
@@ -333,13 +338,9 @@ def speed_profile(
             "speed_profile found no positive speed: the car cannot overcome drag, grade or rolling "
             "resistance somewhere; check the friction coefficient and the pedal map."
         )
-    if closed:
-        v_next = np.roll(v, -1)
-    else:
-        v_next = v[1:]
-        v = v
-    v_pairs = v if closed else v[:-1]
-    # Trapezoid in 1/v: dt = ds / mean(v) for uniform acceleration between nodes.
+    # Pairs of nodes (k, k+1); on a closed path the last pair wraps to the first node.
+    v_pairs, v_next = (v, np.roll(v, -1)) if closed else (v[:-1], v[1:])
+    # dt = ds / mean(v): exact for uniform acceleration between nodes.
     dt = 2.0 * ds / (v_pairs + v_next)
     a_x = (v_next**2 - v_pairs**2) / (2.0 * ds)
     if not closed:
@@ -352,4 +353,5 @@ def speed_profile(
         lap_time=float(np.sum(dt)),
         success=success,
         iterations=passes,
+        length=float(length) if closed else float("nan"),
     )

@@ -10,7 +10,12 @@ Formulation choices, from the measurements in MEASURED.md:
 
 * **Trapezoidal collocation**: ``xi_{k+1} - xi_k = ds_k / 2 (f(xi_k, u_k) + f(xi_{k+1}, u_{k+1}))``
   with inputs linear between nodes. It is A-stable (explicit steps of 3-5 m are not, at hairpin
-  speeds), cheap to build, and converged from a cold start as fast as from a warm one.
+  speeds) and cheap to build. With it the paper's "cold start fails" does not reproduce: on a 3 m
+  grid a cold start (centerline, 10 m/s) converged in 26-41 IPOPT iterations on the two built-in
+  tracks and four real circuits, a warm start from the curvature QP in 75-134, to the same lap
+  time (within 0.002 s); probably because the warm start sits on many active constraints (track
+  edges, tire peaks), where an interior-point method starts badly (a lower ``mu_init`` did not
+  help).
 * **Tires below their peak**: |alpha_f|, |alpha_r| <= the slip angle of the Pacejka peak
   (:meth:`racing_lib.model.ModelParams.peak_slip_angle`). Past the peak the optimum is degenerate
   and IPOPT needs several times more iterations.
@@ -99,6 +104,14 @@ class TimeOptimalSettings:
         Top speed (upper bound on v_x), m/s (None: 190 km/h).
     print_level : int
         IPOPT's print level (0 silent).
+    graph : {"sx", "mx"}
+        CasADi graph of the whole problem. Expressway, 1,464 nodes, cold start (26 iterations):
+        "sx" builds in 13 s and solves in 1.8 s (0.07 s per iteration); "mx" builds in 0.7 s and
+        solves in 6.8 s (0.26 s per iteration). "sx" pays off when a built problem is solved
+        again (cache) or needs many iterations (warm start: about 100); "mx" for one cold solve.
+    mu_min : float
+        Smallest friction coefficient accepted (ice is about 0.1); below it the parameters are
+        taken for a mistake and :class:`PlanningError` is raised before solving.
     ipopt_options : tuple of (name, value)
         Extra IPOPT options, e.g. ``(("mu_init", 1e-3),)`` (a tuple so the settings stay hashable).
     """
@@ -120,6 +133,8 @@ class TimeOptimalSettings:
     v_top: float | None = None
     print_level: int = 0
     ipopt_options: tuple[tuple[str, Any], ...] = ()
+    mu_min: float = 0.1
+    graph: str = "sx"
 
 
 @dataclass
@@ -175,7 +190,7 @@ class _Problem:
     def __init__(self, grid: TrackGrid, params: Any, options: Any, st: TimeOptimalSettings) -> None:
         import casadi as ca
 
-        from racing_lib.model import X, model_terms, spatial_dynamics
+        from racing_lib.model import NU, NX, U, X, model_terms, spatial_dynamics
 
         t0 = time.perf_counter()
         n = grid.n
@@ -184,53 +199,75 @@ class _Problem:
         self.params = params
         self.settings = st
         g = float(params.g)
-        scale = ca.DM(_SCALE)
-        W = ca.SX.sym("w", len(_VARS), n)  # scaled variables, one column per node
-        Z = ca.diag(scale) @ W
-        xi = ca.vertcat(Z[0:_NXS, :], ca.DM(grid.s).T)  # model order: vx vy r epsi ey s
-        assert [int(X.VX), int(X.VY), int(X.R), int(X.EPSI), int(X.EY), int(X.S)] == list(range(6))
-        u = Z[_NXS:, :]
-        kap = ca.DM(grid.kappa).T
-        th = ca.DM(grid.theta).T
-        f = spatial_dynamics(params, options).map(n)(xi, u, kap, th)[0:_NXS, :]
-        terms_fn = model_terms(params, options).map(n)
-        terms = dict(zip(terms_fn.name_out(), terms_fn(xi, u, kap, th), strict=True))
-        nxt = list(range(1, n)) + [0]
-        h = ca.DM(grid.ds).T
-        xs = Z[0:_NXS, :]
-        # Trapezoidal collocation defects, each divided by the scale of its state.
-        defect = xs[:, nxt] - xs - 0.5 * ca.repmat(h, _NXS, 1) * (f + f[:, nxt])
-        defect = ca.diag(1.0 / scale[0:_NXS]) @ defect
-        g_list = [ca.vec(defect)]
-        lbg = [np.zeros(_NXS * n)]
-        ubg = [np.zeros(_NXS * n)]
+        rows = {name: i for i, name in enumerate(_VARS)}
+
+        # One node, in SX: dynamics dxi/ds, path constraints and 1/s_dot (the lap-time integrand).
+        w = ca.SX.sym("w", len(_VARS))  # scaled variables of the node
+        kap_k, th_k, s_k = ca.SX.sym("kappa"), ca.SX.sym("theta"), ca.SX.sym("s")
+        z = w * ca.DM(_SCALE)
+        xi = ca.SX(NX, 1)  # the model's state and input, filled by name
+        for name in _VARS[:_NXS]:
+            xi[int(X[name])] = z[rows[name]]
+        xi[int(X.S)] = s_k
+        u = ca.SX(NU, 1)
+        u[int(U.DELTA)] = z[rows["DELTA"]]
+        u[int(U.AX)] = z[rows["AX"]]
+        f_all = spatial_dynamics(params, options)(xi, u, kap_k, th_k)
+        f = ca.vertcat(*[f_all[int(X[name])] for name in _VARS[:_NXS]])
+        terms_fn = model_terms(params, options)
+        terms = dict(zip(terms_fn.name_out(), terms_fn(xi, u, kap_k, th_k), strict=True))
+        path, lb_path, ub_path = [], [], []
         if st.slip_limit:
             a_f, a_r = params.peak_slip_angle()
-            g_list += [ca.vec(terms["alpha_f"]) / a_f, ca.vec(terms["alpha_r"]) / a_r]
-            lbg += [-np.ones(n), -np.ones(n)]
-            ubg += [np.ones(n), np.ones(n)]
+            path += [terms["alpha_f"] / a_f, terms["alpha_r"] / a_r]
+            lb_path += [-1.0, -1.0]
+            ub_path += [1.0, 1.0]
         if st.friction_ellipse:
             grip = params.mu * g
-            a_x = Z[_VARS.index("AX"), :]
-            use = (a_x / grip) ** 2 + (terms["a_y"] / grip) ** 2
-            g_list.append(ca.vec(use))
-            lbg.append(np.full(n, -np.inf))
-            ubg.append(np.ones(n))
+            path.append((z[rows["AX"]] / grip) ** 2 + (terms["a_y"] / grip) ** 2)
+            lb_path.append(-np.inf)
+            ub_path.append(1.0)
         if st.pedal_limits == "exact":
             pedal = params.pedal
-            base = pedal.m_0 + ca.mtimes(ca.DM(pedal.m_xi).T, xi)
-            excess = Z[_VARS.index("AX"), :] - base
-            g_list.append(ca.vec(excess) / 5.0)
-            lbg.append(np.full(n, -pedal.m_brk / 5.0))
-            ubg.append(np.full(n, pedal.m_thr / 5.0))
+            base = pedal.m_0 + ca.dot(ca.DM(pedal.m_xi), xi)
+            path.append((z[rows["AX"]] - base) / 5.0)
+            lb_path.append(-pedal.m_brk / 5.0)
+            ub_path.append(pedal.m_thr / 5.0)
         elif st.pedal_limits != "iterate":
             raise PlanningError(
                 f"unknown pedal_limits {st.pedal_limits!r}; use 'iterate' or 'exact'."
             )
+        node_fn = ca.Function(
+            "node", [w, kap_k, th_k, s_k], [f, ca.vertcat(*path), 1.0 / terms["s_dot"]]
+        )
+
+        # The whole lap over the mapped node function. With SX the map is inlined into one flat
+        # graph (slow to build, fast to evaluate); with MX CasADi differentiates the map node by
+        # node (fast to build, slower to evaluate). See TimeOptimalSettings.graph.
+        if st.graph not in ("sx", "mx"):
+            raise PlanningError(f"unknown graph {st.graph!r}; use 'sx' or 'mx'.")
+        W = (ca.SX if st.graph == "sx" else ca.MX).sym("w", len(_VARS), n)
+        F, P, inv_sdot = node_fn.map(n)(
+            W, ca.DM(grid.kappa).T, ca.DM(grid.theta).T, ca.DM(grid.s).T
+        )
+        nxt = list(range(1, n)) + [0]
+        h = ca.DM(grid.ds).T
+        xs = W[0:_NXS, :]  # scaled states
+        inv_scale = ca.DM(1.0 / _SCALE[:_NXS])
+        # Trapezoidal collocation defects in scaled units (each divided by its state's scale).
+        defect = (
+            xs[:, nxt]
+            - xs
+            - 0.5 * ca.repmat(h, _NXS, 1) * (F + F[:, nxt]) * ca.repmat(inv_scale, 1, n)
+        )
+        g_list = [ca.vec(defect), ca.vec(P)]
+        lbg = [np.zeros(_NXS * n), np.tile(lb_path, n)]
+        ubg = [np.zeros(_NXS * n), np.tile(ub_path, n)]
         # Objective: lap time (trapezoid in 1/s_dot) + steering-rate regularization, over T_ref.
         w_node = 0.5 * (grid.ds + np.roll(grid.ds, 1))
-        lap = ca.sum2(ca.DM(w_node).T / terms["s_dot"])
-        dd = Z[_VARS.index("DELTA"), nxt] - Z[_VARS.index("DELTA"), :]
+        lap = ca.mtimes(inv_sdot, ca.DM(w_node))
+        delta = W[rows["DELTA"], :] * _SCALE[rows["DELTA"]]
+        dd = delta[:, nxt] - delta
         reg = ca.sum2(dd**2 / h)
         self.t_ref = float(grid.length / 20.0)
         obj = (lap + st.w_ddelta * reg) / self.t_ref
@@ -247,10 +284,7 @@ class _Problem:
         self.solver = ca.nlpsol("time_optimal", "ipopt", nlp, {"ipopt": ipopt, "print_time": False})
         self.lbg = np.concatenate(lbg)
         self.ubg = np.concatenate(ubg)
-        self.lap_fn = ca.Function("lap", [ca.vec(W)], [lap, terms["s_dot"]])
-        self.terms_fn = ca.Function(
-            "terms", [ca.vec(W)], [terms["alpha_f"], terms["alpha_r"], terms["a_y"]]
-        )
+        self.lap_fn = ca.Function("lap", [ca.vec(W)], [lap, 1.0 / inv_sdot])
         self.build_time = time.perf_counter() - t0
 
     def bounds(self, ax_lo: np.ndarray, ax_hi: np.ndarray, v_top: float) -> tuple[Any, Any]:
@@ -399,6 +433,13 @@ def solve_time_optimal(
     grid = TrackGrid.from_track(track, st.spacing, st.car_width, st.margin)
 
     # Cheap feasibility checks before any solver runs.
+    if not params.mu >= st.mu_min:
+        raise PlanningError(
+            f"friction too low: mu = {params.mu} is below {st.mu_min} (even ice is about 0.1, dry "
+            "asphalt 1.0-1.3), so the planner would crawl round the track or fail. Check the "
+            "friction coefficient of the parameter set; to plan anyway, lower "
+            "TimeOptimalSettings.mu_min."
+        )
     prof = speed_profile(
         grid.s, grid.kappa, params, None, grid.theta, v_top, options, length=grid.length
     )
@@ -428,9 +469,7 @@ def solve_time_optimal(
     def ax_limits(z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         if st.pedal_limits == "exact":
             return np.full(grid.n, -grip), np.full(grid.n, grip)
-        xi = np.zeros((grid.n, 6))
-        xi[:, :_NXS] = z[:_NXS].T
-        xi[:, 5] = grid.s
+        xi = _model_states(z, grid)
         lo, hi = pedal.limits(xi)
         lo = np.maximum(np.asarray(lo, float), -grip)
         hi = np.minimum(np.asarray(hi, float), grip)
@@ -543,6 +582,17 @@ def _trajectory(
         model_options=options,
         info={"ipopt_status": status, "ipopt_iterations": iters},
     )
+
+
+def _model_states(z: np.ndarray, grid: TrackGrid) -> np.ndarray:
+    """Model states (N, 6), rows in :class:`racing_lib.model.X` order, from NLP values (7, N)."""
+    from racing_lib.model import NX, X
+
+    xi = np.zeros((grid.n, NX))
+    for i, name in enumerate(_VARS[:_NXS]):
+        xi[:, int(X[name])] = z[i]
+    xi[:, int(X.S)] = grid.s
+    return xi
 
 
 def lap_time_with_model(

@@ -115,6 +115,8 @@ class Trajectory:
         Lap time of the plan, s (includes the interval from the last node back to the first).
     info : dict
         Free-form extras (solver statistics); not written to the CSV.
+    line_length : float
+        Length of the closed line, m (default: last s plus the closing chord).
     """
 
     s: np.ndarray
@@ -134,6 +136,7 @@ class Trajectory:
     model_options: dict[str, Any] = field(default_factory=dict)
     planned_lap_time: float = float("nan")
     info: dict[str, Any] = field(default_factory=dict)
+    line_length: float = float("nan")
 
     def __post_init__(self) -> None:
         n = None
@@ -156,6 +159,11 @@ class Trajectory:
             raise PlanningError("a Trajectory needs at least 4 nodes; plan on a finer grid.")
         if np.any(np.diff(self.s) <= 0):
             raise PlanningError("Trajectory s must be strictly increasing; resample the plan.")
+        if not math.isfinite(self.line_length):
+            chord = math.hypot(self.x[0] - self.x[-1], self.y[0] - self.y[-1])
+            object.__setattr__(self, "line_length", float(self.s[-1] + chord))
+        if self.line_length <= self.s[-1]:
+            raise PlanningError("Trajectory line_length must exceed the last s; re-plan.")
         if not math.isfinite(self.planned_lap_time):
             # Close the lap with the last interval at the mean speed of its ends.
             gap = self.length - self.s[-1]
@@ -180,11 +188,9 @@ class Trajectory:
 
     @property
     def length(self) -> float:
-        """Length of the line, m (``path.length``; the closing chord is included)."""
-        if "path" in self.__dict__ or self.s.size == 0:
-            return float(self.path.length)
-        chord = math.hypot(self.x[0] - self.x[-1], self.y[0] - self.y[-1])
-        return float(self.s[-1] + chord)
+        """Length of the closed line, m (the interval from the last node back to the first
+        included)."""
+        return float(self.line_length)
 
     @property
     def lap_time(self) -> float:
@@ -263,6 +269,7 @@ class Trajectory:
             "method": self.method,
             "model_options": json.dumps(self.model_options, sort_keys=True),
             "planned_lap_time_s": f"{self.planned_lap_time:.6f}",
+            "length_m": f"{self.line_length:.6f}",
             "nodes": self.n,
         }
 
@@ -358,6 +365,7 @@ class Trajectory:
             method=meta.get("method", ""),
             model_options=options,
             planned_lap_time=float(meta.get("planned_lap_time_s", "nan")),
+            line_length=float(meta.get("length_m", "nan")),
         )
 
     # ------------------------------------------------------------------ builders
@@ -419,6 +427,7 @@ class Trajectory:
             model_options=options_to_dict(model_options),
             planned_lap_time=float(np.sum(dt)),
             info=dict(info or {}),
+            line_length=float(path.length),
         )
         object.__setattr__(traj, "path", path)  # reuse the Path just built
         return traj
