@@ -112,6 +112,8 @@ __all__ = [
     "collect_logs",
     "identified_params",
     "identify",
+    "identified_steer_tau",
+    "lagged_steering",
     "lap_logs",
     "main",
     "pedal_map_r2",
@@ -584,16 +586,42 @@ class _Samples:
         """
         if tau <= 1e-4:
             return self.steer
-        a = math.exp(-dt / tau)
         out = np.empty_like(self.steer)
         for start, stop in self.bounds:
-            c = self.steer[start:stop]
-            if c.size == 0:
-                continue
-            nodes, _ = lfilter([1.0 - a], [1.0, -a], c, zi=[a * c[0]])  # delta at k + 1
-            d0 = np.concatenate(([c[0]], nodes[:-1]))  # delta at k
-            out[start:stop] = c + (d0 - c) * (tau / dt) * (1.0 - a)
+            out[start:stop] = lagged_steering(self.steer[start:stop], tau, dt)
         return out
+
+
+def lagged_steering(steer_cmd: np.ndarray, tau: float, dt: float = 0.1) -> np.ndarray:
+    """Mean road-wheel angle over each control period behind a first-order steering actuator.
+
+    The actual angle obeys ``tau delta_dot = delta_cmd - delta`` with each command held for one
+    period ``dt``; the actuator starts settled at the first command (``delta = delta_cmd[0]``).
+    Used by the identification (the steering lag fit) and by the open-loop predictions of
+    :mod:`racing_lib.analysis`. Taught in notebook 02.
+
+    Parameters
+    ----------
+    steer_cmd : ndarray, shape (N,)
+        Steering commands, rad, command ``k`` held from ``t_k`` to ``t_k + dt``.
+    tau : float
+        Time constant of the lag, s; ``tau <= 1e-4`` returns the commands unchanged.
+    dt : float
+        Control period, s.
+
+    Returns
+    -------
+    ndarray, shape (N,)
+        The exact mean angle over each period, rad.
+    """
+    c = np.asarray(steer_cmd, dtype=float).ravel()
+    if tau <= 1e-4 or c.size == 0:
+        return c.copy()
+    a = math.exp(-dt / tau)
+    nodes, _ = lfilter([1.0 - a], [1.0, -a], c, zi=[a * c[0]])  # delta at k + 1
+    d0 = np.concatenate(([c[0]], nodes[:-1]))  # delta at k
+    # Mean of d0 + (c - d0) (1 - exp(-t / tau)) over the period
+    return c + (d0 - c) * (tau / dt) * (1.0 - a)
 
 
 def _samples(logs: Sequence[DriveLog], derivative: Derivative) -> _Samples:
@@ -1304,6 +1332,24 @@ def identified_params() -> ModelParams:
             "`python -m racing_lib.sysid`."
         ) from None
     return ModelParams.from_dict(data["model_params"])
+
+
+def identified_steer_tau() -> float:
+    """The steering lag time constant of the shipped fit (s), identified with the parameters.
+
+    Not part of :class:`~racing_lib.model.ModelParams` (the planning model has no actuator); the
+    MPC and the open-loop predictions of notebook 02 use it to turn commands into road-wheel
+    angles (see :func:`lagged_steering`).
+    """
+    ref = resources.files("racing_lib") / "data" / _DATA_FILE
+    try:
+        data = json.loads(ref.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise ModelError(
+            f"racing_lib/data/{_DATA_FILE} is missing; regenerate it with "
+            "`python -m racing_lib.sysid`."
+        ) from None
+    return float(data["steer_tau"])
 
 
 def run(seed: int = 0, fast: bool | None = None, out: str | None = None) -> IdentificationResult:

@@ -93,7 +93,7 @@ def _notebooks() -> list[Path]:
     )
 
 
-@pytest.mark.parametrize("nb_path", _notebooks(), ids=lambda p: p.name)
+@pytest.mark.parametrize("nb_path", _notebooks(), ids=lambda p: str(p.relative_to(REPO)))
 def test_notebook_outputs_are_stripped_except_checked_cells(nb_path: Path):
     nb = json.loads(nb_path.read_text())
     for i, cell in enumerate(nb["cells"]):

@@ -225,3 +225,19 @@ def test_shipped_parameters_load_and_are_plausible():
     assert p.C_xw == pytest.approx(truth.C_xw, rel=TOLERANCES["C_xw"])
     assert p.I_zz == pytest.approx(truth.I_zz, rel=TOLERANCES["I_zz"])
     assert p.pedal.m_thr > 0.0 and p.pedal.m_brk > p.pedal.m_thr  # brakes beat the engine
+
+
+def test_lagged_steering_is_the_analytic_first_order_response():
+    # A step from 0 to 0.1 rad at period 1: mean angle over period k >= 1 is
+    # 0.1 (1 - exp(-(k-1) dt / tau) tau / dt (1 - exp(-dt / tau))); a constant command is itself.
+    from racing_lib.sysid import lagged_steering
+
+    tau, dt = 0.08, 0.1
+    eff = lagged_steering(np.r_[0.0, np.full(5, 0.1)], tau, dt)
+    a = math.exp(-dt / tau)
+    k = np.arange(1, 6)
+    expected = 0.1 * (1.0 - a ** (k - 1) * tau / dt * (1.0 - a))
+    np.testing.assert_allclose(eff[1:], expected, rtol=1e-12)
+    assert eff[0] == 0.0
+    np.testing.assert_array_equal(lagged_steering(np.full(4, 0.2), tau, dt), np.full(4, 0.2))
+    np.testing.assert_array_equal(lagged_steering(np.arange(3.0), 0.0, dt), np.arange(3.0))

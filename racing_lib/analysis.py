@@ -1,0 +1,666 @@
+"""Analysing the planning model: its linear lateral dynamics and its open-loop prediction error.
+
+Taught in notebook 02 ("the race vehicle model"). Two questions about :mod:`racing_lib.model`:
+
+1. **How does the car respond to steering, and how does that change with speed?** Around straight
+   driving at a constant speed ``v_x`` the lateral states ``[v_y, r]`` obey a linear, second-order
+   system driven by the steering angle ``delta``. :func:`lateral_linearization` takes it from the
+   model's exact Jacobians (so it is the model's own linearization, not a second derivation) and
+   returns a python-control state-space system; :func:`lateral_analysis` sweeps it over speed:
+   eigenvalues, natural frequency, damping, the steady-state yaw-rate gain and the understeer
+   gradient. The classic hand result for the same system (a linear "bicycle" with the axles'
+   cornering stiffnesses ``C_f``, ``C_r``) is what ``tests/test_analysis.py`` checks it against.
+
+2. **How far off is the model over a short horizon?** :func:`prediction_errors` replays a
+   recorded drive: from every recorded state it integrates the model open loop with the commands
+   that were actually sent, and compares the prediction after 0.5 s, 1 s, ... with what the car
+   did. Switching model effects off (:class:`~racing_lib.model.ModelOptions`) shows which of them
+   matter -- the paper's model ablation, measured on prediction instead of lap time.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+import control
+import numpy as np
+
+from racing_lib.errors import ModelError
+from racing_lib.model import Model, ModelOptions, ModelParams, U, X
+from racing_lib.sysid import lagged_steering
+
+__all__ = [
+    "LateralAnalysis",
+    "PredictionError",
+    "ABLATION_VARIANTS",
+    "ERROR_MEASURES",
+    "RecordedDrive",
+    "format_prediction_table",
+    "frenet_states",
+    "lateral_analysis",
+    "lateral_linearization",
+    "predict_open_loop",
+    "prediction_errors",
+    "prediction_table",
+    "understeer_gradient",
+]
+
+#: States of the lateral system, in order.
+LATERAL_STATES = ("v_y", "r")
+#: Outputs of the lateral system, in order: the states and the lateral acceleration of the CoG.
+LATERAL_OUTPUTS = ("v_y", "r", "a_y")
+
+
+# --------------------------------------------------------------------------------------------------
+# Linear lateral dynamics
+# --------------------------------------------------------------------------------------------------
+
+
+def _check_speed(v_x: float) -> float:
+    v = float(v_x)
+    if not (math.isfinite(v) and v >= 2.0):
+        raise ModelError(
+            f"the lateral linearization needs a forward speed v_x >= 2 m/s, got {v_x!r}; the "
+            "slip angles (and the model) are meant for a moving car."
+        )
+    return v
+
+
+def lateral_linearization(
+    params: ModelParams | None = None,
+    v_x: float = 20.0,
+    options: ModelOptions | None = None,
+    accel: float = 0.0,
+) -> control.StateSpace:
+    """Linear lateral dynamics of the model around straight driving.
+
+    The operating point is ``xi = [v_x, 0, 0, 0, 0, 0]`` on a straight, level road, with the tyre
+    acceleration ``a_x`` that gives the net longitudinal acceleration ``accel`` (0: it balances
+    drag and rolling resistance and holds the speed; < 0: braking, which with longitudinal load
+    transfer loads the front axle and unloads the rear). The speed is frozen at ``v_x``, as in any
+    analysis of the lateral dynamics at a given speed. The system is the ``(v_y, r)`` block of the
+    model's exact
+    Jacobians ``A_c = df/dxi``, ``B_c = df/du`` (:meth:`racing_lib.model.Model.jacobians`):
+
+    ``d/dt [v_y, r] = A [v_y, r] + B delta``,   outputs ``[v_y, r, a_y]`` with
+    ``a_y = v_y_dot + r v_x``.
+
+    Taught in notebook 02 (linear analysis).
+
+    Parameters
+    ----------
+    params : ModelParams, optional
+        Model parameters (default ``ModelParams()``).
+    v_x : float
+        Forward speed of the operating point, m/s (>= 2).
+    options : ModelOptions, optional
+        Model effects (default ``ModelOptions()``). Around straight driving only the longitudinal
+        load transfer (with ``accel != 0``) changes the lateral block.
+    accel : float
+        Net longitudinal acceleration ``v_x_dot`` of the operating point, m/s^2.
+
+    Returns
+    -------
+    control.StateSpace
+        States ``v_y`` (m/s), ``r`` (rad/s); input ``delta`` (rad); outputs ``v_y`` (m/s),
+        ``r`` (rad/s), ``a_y`` (m/s^2).
+    """
+    v = _check_speed(v_x)
+    model = Model(params, options)
+    xi = np.zeros(len(X))
+    xi[X.VX] = v
+    # On a straight v_x_dot is a_x minus the resistances: pick a_x for the wanted v_x_dot.
+    a_x = float(accel) - float(model.xi_dot(xi, [0.0, 0.0])[X.VX])
+    A_c, B_c = model.jacobians(xi, [0.0, a_x])
+    lat = [X.VY, X.R]
+    A = A_c[np.ix_(lat, lat)]
+    B = B_c[np.ix_(lat, [U.DELTA])]
+    C = np.vstack([np.eye(2), A[0] + np.array([0.0, v])])  # a_y = v_y_dot + r v_x
+    D = np.vstack([np.zeros((2, 1)), B[0]])
+    return control.ss(
+        A, B, C, D, inputs=["delta"], outputs=list(LATERAL_OUTPUTS), states=list(LATERAL_STATES)
+    )
+
+
+def understeer_gradient(
+    params: ModelParams | None = None,
+    v_x: float = 20.0,
+    options: ModelOptions | None = None,
+    accel: float = 0.0,
+) -> float:
+    """Understeer gradient ``K`` of the model, rad/(m/s^2), from its steady-state yaw-rate gain.
+
+    In steady cornering the linear model turns with ``r / delta = v_x / (L + K v_x^2)``, ``L`` the
+    wheelbase. ``K > 0``: understeer (the car needs more steering as it corners harder); ``K < 0``
+    oversteer (unstable above the critical speed ``sqrt(-L / K)``); ``K = 0`` neutral. Computed from
+    the DC gain of :func:`lateral_linearization` (for the linear model ``K`` does not depend on the
+    speed). Taught in notebook 02.
+
+    Parameters
+    ----------
+    params : ModelParams, optional
+        Model parameters (default ``ModelParams()``).
+    v_x : float
+        Speed at which the gain is evaluated, m/s.
+    options : ModelOptions, optional
+        Model effects.
+    accel : float
+        Net longitudinal acceleration, m/s^2 (with longitudinal load transfer, braking moves the
+        car towards oversteer).
+    """
+    p = ModelParams() if params is None else params
+    v = _check_speed(v_x)
+    sys = lateral_linearization(p, v, options, accel)
+    gain = float(np.real(control.dcgain(sys))[1, 0])  # r / delta
+    return (v / gain - p.wheelbase) / v**2
+
+
+@dataclass(frozen=True)
+class LateralAnalysis:
+    """The lateral dynamics across speed (result of :func:`lateral_analysis`).
+
+    Attributes
+    ----------
+    speeds : ndarray (n,)
+        Forward speeds, m/s.
+    eigenvalues : ndarray (n, 2), complex
+        Poles of the ``(v_y, r)`` system at each speed, 1/s (sorted by real part).
+    natural_frequency : ndarray (n,)
+        Undamped natural frequency ``omega_n = sqrt(det A)``, rad/s (NaN where ``det A <= 0``:
+        one real pole is unstable).
+    damping : ndarray (n,)
+        Damping ratio ``zeta = -trace(A) / (2 omega_n)``, -; above 1 the poles are real (NaN
+        where ``omega_n`` is).
+    yaw_rate_gain : ndarray (n,)
+        Steady-state yaw rate per steering angle ``r / delta``, 1/s.
+    understeer_gradient : float
+        ``K``, rad/(m/s^2) (see :func:`understeer_gradient`).
+    characteristic_speed : float
+        ``sqrt(L / K)`` for an understeering car, m/s: the speed of the largest yaw-rate gain;
+        ``inf`` for a neutral or oversteering one.
+    critical_speed : float
+        ``sqrt(-L / K)`` for an oversteering car, m/s: above it the car is unstable; ``inf``
+        otherwise.
+    """
+
+    speeds: np.ndarray
+    eigenvalues: np.ndarray
+    natural_frequency: np.ndarray
+    damping: np.ndarray
+    yaw_rate_gain: np.ndarray
+    understeer_gradient: float
+    characteristic_speed: float
+    critical_speed: float
+
+    @property
+    def stable(self) -> np.ndarray:
+        """True where both poles have a negative real part."""
+        return np.all(self.eigenvalues.real < 0.0, axis=1)
+
+
+def lateral_analysis(
+    params: ModelParams | None = None,
+    speeds: Sequence[float] | np.ndarray = (10.0, 20.0, 30.0, 40.0, 50.0),
+    options: ModelOptions | None = None,
+    accel: float = 0.0,
+) -> LateralAnalysis:
+    """Eigenvalues, damping and steady-state gain of the lateral dynamics at several speeds.
+
+    Taught in notebook 02. See :func:`lateral_linearization` for the system.
+
+    Parameters
+    ----------
+    params : ModelParams, optional
+        Model parameters (default ``ModelParams()``).
+    speeds : sequence of float
+        Forward speeds, m/s (each >= 2).
+    options : ModelOptions, optional
+        Model effects.
+    accel : float
+        Net longitudinal acceleration of the operating points, m/s^2 (see
+        :func:`lateral_linearization`).
+
+    Returns
+    -------
+    LateralAnalysis
+    """
+    p = ModelParams() if params is None else params
+    v = np.asarray(speeds, dtype=float).ravel()
+    if v.size == 0:
+        raise ModelError("lateral_analysis needs at least one speed (m/s).")
+    eig = np.empty((v.size, 2), dtype=complex)
+    wn = np.empty(v.size)
+    zeta = np.empty(v.size)
+    gain = np.empty(v.size)
+    for i, vi in enumerate(v):
+        sys = lateral_linearization(p, float(vi), options, accel)
+        A = np.asarray(sys.A)
+        lam = np.linalg.eigvals(A)
+        eig[i] = lam[np.lexsort((lam.imag, lam.real))]
+        det, tr = float(np.linalg.det(A)), float(np.trace(A))
+        wn[i] = math.sqrt(det) if det > 0.0 else float("nan")
+        zeta[i] = -tr / (2.0 * wn[i]) if det > 0.0 else float("nan")
+        gain[i] = float(np.real(control.dcgain(sys))[1, 0])
+    K = understeer_gradient(p, float(v.max()), options, accel)  # most accurate at speed
+    L = p.wheelbase
+    return LateralAnalysis(
+        speeds=v,
+        eigenvalues=eig,
+        natural_frequency=wn,
+        damping=zeta,
+        yaw_rate_gain=gain,
+        understeer_gradient=K,
+        characteristic_speed=math.sqrt(L / K) if K > 0.0 else math.inf,
+        critical_speed=math.sqrt(-L / K) if K < 0.0 else math.inf,
+    )
+
+
+# --------------------------------------------------------------------------------------------------
+# Open-loop prediction error
+# --------------------------------------------------------------------------------------------------
+
+
+class RecordedDrive(Protocol):
+    """What :func:`prediction_errors` needs of a log (a ``LapLog`` or a ``sysid.DriveLog``).
+
+    Node arrays (observations) have ``N`` or ``N + 1`` entries, command arrays ``N``; command
+    ``k`` was sent after observation ``k`` and held until observation ``k + 1``.
+    """
+
+    t: np.ndarray  # s
+    x: np.ndarray  # m
+    y: np.ndarray  # m
+    psi: np.ndarray  # rad
+    vx: np.ndarray  # m/s
+    vy: np.ndarray  # m/s
+    r: np.ndarray  # rad/s
+    steer: np.ndarray  # steering command, rad
+    pedal: np.ndarray  # pedal command, -
+
+
+def frenet_states(log: RecordedDrive, track: Any) -> np.ndarray:
+    """The model state ``xi`` of every observation of ``log`` on ``track``'s centerline.
+
+    Parameters
+    ----------
+    log : RecordedDrive
+        A recorded drive.
+    track : Track
+        The track it was driven on; its centerline is the reference line of ``e_y``, ``e_psi``
+        and ``s``.
+
+    Returns
+    -------
+    ndarray (M, 6)
+        Rows ``[v_x, v_y, r, e_psi, e_y, s]`` (m/s, m/s, rad/s, rad, m, m); ``s`` is unwrapped so
+        that it grows continuously across the start/finish line.
+    """
+    path = track.centerline
+    x, y, psi = (np.asarray(getattr(log, k), dtype=float) for k in ("x", "y", "psi"))
+    s, e_y, e_psi = path.to_frenet(x, y, psi)
+    xi = np.empty((x.size, len(X)))
+    xi[:, X.VX] = np.asarray(log.vx, dtype=float)
+    xi[:, X.VY] = np.asarray(log.vy, dtype=float)
+    xi[:, X.R] = np.asarray(log.r, dtype=float)
+    xi[:, X.EPSI] = e_psi
+    xi[:, X.EY] = e_y
+    xi[:, X.S] = np.unwrap(np.asarray(s, dtype=float), period=float(path.length))
+    return xi
+
+
+def predict_open_loop(
+    model: Model,
+    xi0: np.ndarray,
+    steer: np.ndarray,
+    pedal: np.ndarray,
+    track: Any,
+    dt: float = 0.1,
+    substeps: int = 4,
+) -> np.ndarray:
+    """Integrate the model open loop from a batch of states with given command sequences.
+
+    Each control period holds the road-wheel angle and the pedal constant; the pedal becomes the
+    tyre acceleration through the model's pedal map (``params.pedal``) at the *predicted* state,
+    re-evaluated at every substep. Curvature and road pitch are read from ``track`` at the
+    predicted ``s``. Integration: RK4 with ``substeps`` steps per period (the tyre modes are stiff
+    at low speed; 4 keeps RK4 stable down to about 8 m/s for the default car).
+
+    Parameters
+    ----------
+    model : Model
+        The model to predict with.
+    xi0 : ndarray (N, 6)
+        Initial states, one per row.
+    steer : ndarray (N, H)
+        Road-wheel steering angle of each period, rad.
+    pedal : ndarray (N, H)
+        Pedal of each period, -.
+    track : Track
+        Supplies ``kappa(s)`` of the centerline and the grade ``theta(s)``.
+    dt : float
+        Control period, s.
+    substeps : int
+        RK4 steps per period.
+
+    Returns
+    -------
+    ndarray (H + 1, N, 6)
+        Predicted states at ``t = 0, dt, ..., H dt``.
+    """
+    xi = np.array(xi0, dtype=float, ndmin=2)
+    steer = np.array(steer, dtype=float, ndmin=2)
+    pedal = np.array(pedal, dtype=float, ndmin=2)
+    if steer.shape != pedal.shape or steer.shape[0] != xi.shape[0]:
+        raise ModelError(
+            f"steer {steer.shape} and pedal {pedal.shape} must both be (N, H) with N = "
+            f"{xi.shape[0]} rows, one per initial state."
+        )
+    if int(substeps) < 1:
+        raise ModelError(f"substeps must be a positive integer, got {substeps!r}.")
+    path = track.centerline
+    length = float(path.length)
+    h = float(dt) / int(substeps)
+    out = [xi.copy()]
+    u = np.empty((xi.shape[0], 2))
+    for j in range(steer.shape[1]):
+        u[:, U.DELTA] = steer[:, j]
+        for _ in range(int(substeps)):
+            s = xi[:, X.S] % length
+            u[:, U.AX] = model.params.pedal.ax(xi, pedal[:, j])
+            kappa = np.asarray(path.curvature(s), dtype=float)
+            theta = np.asarray(track.grade(s), dtype=float)
+            xi = np.atleast_2d(model.step(xi, u, h, kappa=kappa, theta=theta))
+        out.append(xi.copy())
+    return np.stack(out)
+
+
+#: Error measures reported by :func:`prediction_errors`: name -> (description, unit).
+ERROR_MEASURES: dict[str, tuple[str, str]] = {
+    "v_x": ("longitudinal speed", "m/s"),
+    "v_y": ("lateral speed", "m/s"),
+    "r": ("yaw rate", "rad/s"),
+    "e_psi": ("heading", "rad"),
+    "position": ("position (hypot of the s and e_y errors)", "m"),
+}
+
+
+@dataclass(frozen=True)
+class PredictionError:
+    """Open-loop prediction error of one model variant on one recorded drive.
+
+    Attributes
+    ----------
+    label : str
+        Name of the variant (e.g. ``"no drag"``).
+    options : ModelOptions
+        Model effects of the variant.
+    horizons : tuple of float
+        Prediction horizons, s.
+    rms : dict of str -> ndarray (n_horizons,)
+        RMS error at each horizon, per measure of :data:`ERROR_MEASURES`, in its unit.
+    errors : dict of str -> ndarray (n_windows, n_horizons)
+        Absolute error of every window at each horizon, per measure, in its unit.
+    starts : ndarray (n_windows,)
+        Index of the observation each window starts from.
+    s_start : ndarray (n_windows,)
+        Arc length of the start points on the track centerline, m, in [0, length).
+    """
+
+    label: str
+    options: ModelOptions
+    horizons: tuple[float, ...]
+    rms: dict[str, np.ndarray] = field(default_factory=dict)
+    errors: dict[str, np.ndarray] = field(default_factory=dict)
+    starts: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
+    s_start: np.ndarray = field(default_factory=lambda: np.zeros(0))
+
+    @property
+    def n_windows(self) -> int:
+        """Number of prediction windows (start points) averaged over."""
+        return int(self.starts.size)
+
+    def _column(self, measure: str, horizon: float) -> int:
+        if measure not in self.rms:
+            raise ModelError(f"unknown measure {measure!r}; known: {sorted(self.rms)}.")
+        for i, hz in enumerate(self.horizons):
+            if abs(hz - horizon) < 1e-9:
+                return i
+        raise ModelError(f"no horizon {horizon} s; computed: {list(self.horizons)}.")
+
+    def at(self, measure: str, horizon: float) -> float:
+        """RMS error of ``measure`` at ``horizon`` (s), in the measure's unit."""
+        return float(self.rms[measure][self._column(measure, horizon)])
+
+    def percentile(self, measure: str, horizon: float, q: float) -> float:
+        """The ``q``-th percentile (0-100) of the absolute error of ``measure`` at ``horizon``."""
+        return float(np.percentile(self.errors[measure][:, self._column(measure, horizon)], q))
+
+    def fraction_above(self, measure: str, horizon: float, threshold: float) -> float:
+        """Share of the windows whose absolute error of ``measure`` at ``horizon`` exceeds
+        ``threshold`` (in the measure's unit), 0-1."""
+        col = self.errors[measure][:, self._column(measure, horizon)]
+        return float(np.mean(col > threshold))
+
+
+def _horizon_steps(horizons: Sequence[float], dt: float) -> list[int]:
+    steps = []
+    for hz in horizons:
+        k = int(round(float(hz) / dt))
+        if k < 1 or abs(k * dt - float(hz)) > 1e-6:
+            raise ModelError(
+                f"each horizon must be a positive multiple of the control period {dt} s; "
+                f"got {hz!r}."
+            )
+        steps.append(k)
+    return steps
+
+
+def prediction_errors(
+    log: RecordedDrive,
+    track: Any,
+    params: ModelParams | None = None,
+    options: ModelOptions | None = None,
+    horizons: Sequence[float] = (0.5, 1.0),
+    *,
+    label: str | None = None,
+    steer_tau: float = 0.0,
+    stride: int = 1,
+    v_min: float = 5.0,
+    dt: float | None = None,
+    substeps: int = 4,
+) -> PredictionError:
+    """Open-loop prediction error of the model against a recorded drive.
+
+    From every ``stride``-th observation ``k`` (whose window stays above ``v_min``), the model
+    starts at the measured state ``xi_k`` (:func:`frenet_states`) and is driven open loop by the
+    recorded commands ``k, k+1, ...`` (:func:`predict_open_loop`); after each horizon ``T`` the
+    prediction is compared with the measured state at ``t_k + T``. Nothing is re-fitted: this is
+    how far the model, as a planner or an MPC would use it, drifts from the car. Taught in
+    notebook 02.
+
+    Parameters
+    ----------
+    log : RecordedDrive
+        The drive (e.g. ``LapResult.log`` or a ``sysid.DriveLog``). It should contain no wall
+        contact: the model knows no walls.
+    track : Track
+        The track it was driven on.
+    params : ModelParams, optional
+        Model parameters (e.g. :func:`racing_lib.sysid.identified_params`).
+    options : ModelOptions, optional
+        Model effects (default ``ModelOptions()``).
+    horizons : sequence of float
+        Prediction horizons, s, multiples of the control period.
+    label : str, optional
+        Name of the variant (default: ``options.label()``).
+    steer_tau : float
+        Time constant of the steering actuator, s: commands become road-wheel angles through
+        :func:`racing_lib.sysid.lagged_steering` (0: the command is the angle).
+    stride : int
+        Use every ``stride``-th observation as a start point.
+    v_min : float
+        Skip windows in which the measured ``v_x`` drops below this, m/s.
+    dt : float, optional
+        Control period, s (default: from the log's time stamps).
+    substeps : int
+        RK4 steps per control period.
+
+    Returns
+    -------
+    PredictionError
+        RMS errors of ``v_x``, ``v_y``, ``r``, ``e_psi`` and position at each horizon.
+
+    Raises
+    ------
+    ModelError
+        Inconsistent log arrays, bad horizons, or no usable window.
+    """
+    params = ModelParams() if params is None else params
+    options = ModelOptions() if options is None else options
+    t = np.asarray(log.t, dtype=float)
+    steer_cmd = np.asarray(log.steer, dtype=float)
+    pedal = np.asarray(log.pedal, dtype=float)
+    n_cmd = steer_cmd.size
+    if pedal.size != n_cmd or t.size not in (n_cmd, n_cmd + 1):
+        raise ModelError(
+            f"the log has {t.size} observations, {n_cmd} steering and {pedal.size} pedal "
+            "commands; expected N or N + 1 observations and N of each command."
+        )
+    if dt is None:
+        dt = float(np.median(np.diff(t))) if t.size > 1 else 0.1
+    steps = _horizon_steps(horizons, dt)
+    h_max = max(steps)
+    xi_meas = frenet_states(log, track)
+    delta = lagged_steering(steer_cmd, steer_tau, dt)
+
+    # Start points whose whole window lies within the observations and above v_min.
+    last_start = min(n_cmd, t.size - 1) - h_max
+    if last_start < 0:
+        raise ModelError(
+            f"the log ({t.size} observations) is shorter than the longest horizon "
+            f"({h_max} periods)."
+        )
+    starts = np.arange(0, last_start + 1, max(int(stride), 1))
+    vx = xi_meas[:, X.VX]
+    ok = np.array([vx[k : k + h_max + 1].min() >= v_min for k in starts], dtype=bool)
+    starts = starts[ok]
+    if starts.size == 0:
+        raise ModelError(
+            f"no prediction window of {h_max * dt:.1f} s stays above v_min = {v_min} m/s; "
+            "use a log of faster driving or lower v_min."
+        )
+    window = starts[:, None] + np.arange(h_max)[None, :]
+    pred = predict_open_loop(
+        Model(params, options),
+        xi_meas[starts],
+        delta[window],
+        pedal[window],
+        track,
+        dt=dt,
+        substeps=substeps,
+    )
+    errors: dict[str, list[np.ndarray]] = {name: [] for name in ERROR_MEASURES}
+    for k in steps:
+        err = pred[k] - xi_meas[starts + k]
+        errors["v_x"].append(np.abs(err[:, X.VX]))
+        errors["v_y"].append(np.abs(err[:, X.VY]))
+        errors["r"].append(np.abs(err[:, X.R]))
+        errors["e_psi"].append(np.abs((err[:, X.EPSI] + math.pi) % (2.0 * math.pi) - math.pi))
+        errors["position"].append(np.hypot(err[:, X.S], err[:, X.EY]))
+    table = {name: np.column_stack(cols) for name, cols in errors.items()}
+    return PredictionError(
+        label=options.label() if label is None else label,
+        options=options,
+        horizons=tuple(float(hz) for hz in horizons),
+        rms={name: np.sqrt(np.mean(e**2, axis=0)) for name, e in table.items()},
+        errors=table,
+        starts=starts,
+        s_start=xi_meas[starts, X.S] % float(track.centerline.length),
+    )
+
+
+#: The paper's model ablation as prediction variants: label -> options.
+ABLATION_VARIANTS: dict[str, ModelOptions] = {
+    "full model (drag + lon. transfer)": ModelOptions(),
+    "no drag": ModelOptions(drag=False),
+    "no longitudinal transfer": ModelOptions(longitudinal_weight_transfer=False),
+    "with lateral transfer": ModelOptions(lateral_weight_transfer=True),
+}
+
+
+def prediction_table(
+    log: RecordedDrive,
+    track: Any,
+    params: ModelParams | None = None,
+    variants: Mapping[str, ModelOptions] | None = None,
+    horizons: Sequence[float] = (0.5, 1.0),
+    **kwargs: Any,
+) -> list[PredictionError]:
+    """:func:`prediction_errors` for several model variants on the same drive.
+
+    Parameters
+    ----------
+    log, track, params, horizons
+        As for :func:`prediction_errors`.
+    variants : mapping of label -> ModelOptions, optional
+        Default :data:`ABLATION_VARIANTS` (the paper's ablation: the full model, no drag, no
+        longitudinal load transfer, with lateral load transfer).
+    **kwargs
+        Passed on to :func:`prediction_errors` (``steer_tau``, ``stride``, ...).
+
+    Returns
+    -------
+    list of PredictionError
+        One per variant, in order. Format with :func:`format_prediction_table`.
+    """
+    variants = ABLATION_VARIANTS if variants is None else variants
+    return [
+        prediction_errors(log, track, params, opts, horizons, label=label, **kwargs)
+        for label, opts in variants.items()
+    ]
+
+
+def format_prediction_table(
+    rows: Sequence[PredictionError],
+    measures: Sequence[str] = ("v_x", "r", "position"),
+    digits: int = 2,
+    scale: Mapping[str, tuple[float, str]] | None = None,
+) -> str:
+    """A prediction table as aligned text: one row per variant, one column per measure and horizon.
+
+    Parameters
+    ----------
+    rows : sequence of PredictionError
+        From :func:`prediction_table`.
+    measures : sequence of str
+        Keys of :data:`ERROR_MEASURES` to show.
+    digits : int
+        Decimals printed (round coarsely for text that must be stable across machines).
+    scale : mapping of measure -> (factor, unit), optional
+        Display conversions, e.g. ``{"r": (180 / pi, "deg/s")}``.
+    """
+    if not rows:
+        raise ModelError("format_prediction_table needs at least one PredictionError.")
+    scale = dict(scale or {})
+    horizons = rows[0].horizons
+    heads = []
+    for m in measures:
+        unit = scale.get(m, (1.0, ERROR_MEASURES[m][1]))[1]
+        heads += [f"{m} @{hz:g}s [{unit}]" for hz in horizons]
+    width = max(len(r.label) for r in rows)
+    cols = [max(len(h), digits + 4) for h in heads]
+    lines = ["  ".join([" " * width, *(h.rjust(w) for h, w in zip(heads, cols, strict=True))])]
+    for r in rows:
+        cells = []
+        for m in measures:
+            factor = scale.get(m, (1.0, ""))[0]
+            cells += [f"{factor * r.at(m, hz):.{digits}f}" for hz in horizons]
+        lines.append(
+            "  ".join(
+                [r.label.ljust(width), *(c.rjust(w) for c, w in zip(cells, cols, strict=True))]
+            )
+        )
+    return "\n".join(lines)
