@@ -251,8 +251,8 @@ def run_lap(
         s_line = line_tracker.project(obs.x, obs.y)[0]
         crossed = _crossing_time(t_prev, obs.t, s_line_prev, s_line, line_path.length)
         if bar is not None and t_start is not None:
-            bar.n = min(int(s_line), bar.total)
-            bar.refresh()
+            # tqdm throttles its own redraws; only forward progress is reported.
+            bar.update(max(0, min(int(s_line), bar.total) - bar.n))
         if crossed is not None:
             if t_start is None:
                 t_start = crossed

@@ -40,6 +40,26 @@ def build_controller(
         from racing_lib.control.nominal import NominalController
 
         return NominalController.from_trajectory(trajectory)
+    if name in ("coupled-mpc", "decoupled-mpc"):
+        import dataclasses
+
+        from racing_lib.control.mpc import CoupledMPC, DecoupledMPC, MPCSettings
+        from racing_lib.sysid import identified_params
+
+        settings = MPCSettings(smooth_transition=smooth_transition)
+        if weights:
+            known = {f.name for f in dataclasses.fields(MPCSettings)}
+            unknown = sorted(set(weights) - known)
+            if unknown:
+                raise ControlError(
+                    f"unknown MPC weight(s) {unknown}; valid names are the fields of MPCSettings "
+                    "such as w_vx, w_vy, w_r, w_epsi, w_ey, w_ddelta."
+                )
+            settings = dataclasses.replace(settings, **weights)
+        cls = CoupledMPC if name == "coupled-mpc" else DecoupledMPC
+        # The controllers predict with the model identified from driving data (chapter 02).
+        return cls(trajectory, params=identified_params(), options=options, track=track,
+                   settings=settings)  # fmt: skip
     raise ControlError(f"unknown controller {name!r}; choose one of {', '.join(CONTROLLER_NAMES)}.")
 
 

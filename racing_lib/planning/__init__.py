@@ -109,7 +109,7 @@ def plan(
         curvature-optimal QP; ``time-optimal``: the NLP warm-started from the QP (two-stage
         planner).
     params : ModelParams, optional
-        Planning model parameters (default ``ModelParams()``).
+        Planning model parameters (default: the identified set, ``sysid.identified_params()``).
     options : ModelOptions, optional
         Model effects (default ``ModelOptions()``).
     spacing : float

@@ -471,7 +471,7 @@ def solve_curvature(
     track : Track
         The track (its centerline is the Frenet reference).
     params : ModelParams, optional
-        Planning model parameters (default ``ModelParams()``).
+        Planning model parameters (default: the identified set, ``sysid.identified_params()``).
     options : ModelOptions, optional
         Model effects (default ``ModelOptions()``): used in the linearized dynamics and the drag in
         the speed profile.

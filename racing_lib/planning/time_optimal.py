@@ -395,7 +395,7 @@ def solve_time_optimal(
     track : Track
         The track; its centerline is the Frenet reference of the NLP.
     params : ModelParams, optional
-        Planning model parameters (default ``ModelParams()``).
+        Planning model parameters (default: the identified set, ``sysid.identified_params()``).
     options : ModelOptions, optional
         Model effects (default ``ModelOptions()``); any ablation plans through this same code.
     settings : TimeOptimalSettings, optional

@@ -449,7 +449,7 @@ class Trajectory:
         track : Track
             The track.
         params : ModelParams, optional
-            Planning parameters (default: ``ModelParams()`` if racing_lib.model is available).
+            Planning parameters (default: the identified set, ``sysid.identified_params()``).
         pedal_map : PedalMap, optional
             a_x limits (default: ``params.pedal_map`` if present).
         options : ModelOptions, optional
@@ -497,17 +497,20 @@ def _param_sum(params: Any, names: tuple[str, ...], default: float) -> float:
 
 
 def default_model_inputs(params: Any, pedal_map: Any, options: Any) -> tuple[Any, Any, Any]:
-    """Fill in defaults from racing_lib.model: ModelParams(), its pedal map, ModelOptions()."""
-    try:
-        from racing_lib import model
-    except ImportError:  # the model module is optional for the centerline plan
-        return params, pedal_map, options
+    """Fill in the defaults: the identified parameter set, its pedal map, ``ModelOptions()``.
+
+    The planners use the model identified from driving data (chapter 02, shipped with the package)
+    unless told otherwise, as the paper planned with its identified model.
+    """
+    from racing_lib import model
+    from racing_lib.sysid import identified_params
+
     if params is None:
-        params = model.ModelParams()
+        params = identified_params()
     if options is None:
         options = model.ModelOptions()
     if pedal_map is None:
-        pedal_map = getattr(params, "pedal_map", None)
+        pedal_map = params.pedal
     return params, pedal_map, options
 
 
