@@ -1,9 +1,9 @@
 """The ``racing-lib`` command.
 
-Sub-commands (see ``racing-lib --help``): ``tracks``, ``plan``, ``lap``. With ``--json`` a command
-prints exactly one JSON object on standard output; everything meant for a person goes to standard
-error. Errors of racing_lib are printed as one line (``error: ...``) with exit status 2, never as a
-traceback.
+Sub-commands (see ``racing-lib --help``): ``tracks``, ``plan``, ``lap``, ``tune``. With ``--json``
+a command prints exactly one JSON object on standard output; everything meant for a person goes to
+standard error. Errors of racing_lib are printed as one line (``error: ...``) with exit status
+2, never as a traceback.
 """
 
 from __future__ import annotations
@@ -162,12 +162,28 @@ def cmd_lap(args: argparse.Namespace) -> int:
             f"({trajectory.lap_time:.2f} s)"
         )
 
+    weights = None
+    if args.controller != "nominal":
+        from racing_lib.tuning import configuration_name, tuned_weights
+
+        method = trajectory.method or args.method
+        config = configuration_name(
+            args.controller, method, _model_options(args), not args.no_smooth_transition
+        )
+        weights = tuned_weights(config) if config else None
+        _say(
+            f"MPC weights: tuned for '{config}'"
+            if weights
+            else "MPC weights: defaults (no tuned set shipped for this configuration)"
+        )
+
     spec = LapSpec(
         track=track,
         trajectory=trajectory,
         controller=args.controller,
         smooth_transition=not args.no_smooth_transition,
         options=_model_options(args),
+        weights=weights,
     )
     seeds = [args.seed + i for i in range(args.trials)]
     out_dir = FilePath(args.out) if args.out else None
@@ -255,6 +271,44 @@ def _save_lap_outputs(out_dir: FilePath, track, trajectory, results, report) -> 
     atomic_write_json(out_dir / "summary.json", _clean(report))
 
 
+def cmd_tune(args: argparse.Namespace) -> int:
+    """Tune the coupled MPC's weights with CMA-ES on the time-optimal plan of a track."""
+    from racing_lib.io import atomic_write_json
+    from racing_lib.track import load_track
+    from racing_lib.tuning import TuningSettings, config_spec, tune_weights
+
+    track = load_track(args.track)
+    _say(f"planning {track.name} time-optimally ...")
+    spec = config_spec("main", track)
+    out = FilePath(args.out)
+    work = out.with_name(out.stem + "_checkpoints")
+    _say(f"tuning with CMA-ES: {args.budget} generations, {args.workers} workers; "
+         f"checkpoints in {work}/ (rerun the same command to resume)")  # fmt: skip
+    result = tune_weights(
+        spec,
+        seeds=(args.seed,),
+        settings=TuningSettings(max_generations=args.budget, seed=args.seed),
+        workers=args.workers,
+        out_dir=work,
+        resume=True,
+        progress=True,
+    )
+    atomic_write_json(
+        out,
+        {
+            "track": track.name,
+            "configuration": "main",
+            "best_objective": result.best_objective,
+            "generations": result.generations,
+            "evaluations": result.evaluations,
+            "weights": result.best_weights,
+        },
+    )
+    _say(f"best objective {result.best_objective:.3f} after {result.evaluations} laps")
+    print(json.dumps(_clean(result.best_weights), indent=2))
+    return 0
+
+
 # --------------------------------------------------------------------------------------------------
 # argument parsing
 
@@ -322,6 +376,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", help="folder for figures, logs, the plan and summary.json")
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     p.set_defaults(func=cmd_lap)
+
+    p = sub.add_parser("tune", help="tune the coupled MPC's weights with CMA-ES")
+    _add_track(p)
+    p.add_argument("--budget", type=int, default=20, help="CMA-ES generations (default 20)")
+    p.add_argument("--workers", type=int, default=2, help="parallel lap processes (default 2)")
+    p.add_argument("--seed", type=int, default=0, help="seed of CMA-ES and of the laps")
+    p.add_argument("--out", default="tuned_weights.json", help="where to write the weights")
+    p.set_defaults(func=cmd_tune)
     return parser
 
 

@@ -1,0 +1,634 @@
+"""Write the exercise notebooks and their solutions from one source (this file).
+
+Usage (from the repository root)::
+
+    python exercises/make_notebooks.py          # writes exercises/NN_*.ipynb and solutions/
+    python tools/refresh_notebooks.py exercises/*.ipynb exercises/solutions/*.ipynb
+
+A template and its solution differ only in the body of the functions the reader writes, so both
+are generated from the same cells here and cannot drift apart (``tests/test_exercises.py`` checks
+that the committed notebooks are what this script writes). The checks themselves live in the
+package, ``racing_lib.exercises.chNN``; they compare the reader's function with the library.
+Check cells carry ``# NBVAL_CHECK_OUTPUT``: nbval then verifies that every template still says
+"not done yet" and every solution says "correct".
+
+Adding an exercise: add an entry to a chapter's ``exercises`` list below (markdown, the template
+body, the solution body, the check call), write its check in ``racing_lib/exercises/chNN.py``
+with a test of a plausible wrong answer in ``tests/test_exercises.py``, then run the two commands
+above.
+"""
+
+from __future__ import annotations
+
+import re
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import nbformat
+
+HERE = Path(__file__).resolve().parent
+CHECK_MARK = "# NBVAL_CHECK_OUTPUT"
+TODO = "    # YOUR CODE HERE\n    raise NotImplementedError"
+
+
+@dataclass
+class Exercise:
+    """One exercise: the explanation, the function header, its solution body, the check call."""
+
+    markdown: str
+    header: str  # def line and docstring of the reader's function
+    solution: str  # the function body (indented by four spaces)
+    check: str  # the call of the check, e.g. "check_frenet_projection(frenet_projection)"
+    after: str = ""  # optional code cell after the check (uses the reader's function)
+
+
+@dataclass
+class Chapter:
+    name: str  # file name without .ipynb
+    title: str
+    intro: str
+    imports: str
+    exercises: list[Exercise] = field(default_factory=list)
+    outro: str = ""
+
+
+SETUP = "rng = racing_lib.notebook.setup(seed=0)"
+
+# --------------------------------------------------------------------------------------------------
+# Chapter 01
+
+CH01 = Chapter(
+    name="01_frenet",
+    title="Exercises 01 · The Frenet frame",
+    intro="""Chapter 01 described the car's position relative to the road by the Frenet coordinates
+$(s, e_y, e_\\psi)$. Here you write the two maps between Cartesian and Frenet coordinates and the
+kinematic equations yourself. Each exercise gives a function to complete: replace
+`raise NotImplementedError` by your code and run the check below it. A check compares your function
+with `racing_lib` on several cases and tells you, in metres and seconds, what differs.
+
+Allowed tools: `numpy`, `scipy`, and the *evaluation* methods of a `racing_lib.track.Path`:
+`path.position(s)`, `path.heading(s)`, `path.curvature(s)`, `path.sample(ds=...)`, `path.length`
+(not `to_frenet` or `to_cartesian`: those are what you are rebuilding).""",
+    imports="""import math
+
+import numpy as np
+from scipy.optimize import minimize_scalar
+
+import racing_lib.notebook
+from racing_lib.exercises.ch01 import (
+    check_frenet_projection,
+    check_frenet_rates,
+    check_frenet_to_cartesian,
+)""",
+    exercises=[
+        Exercise(
+            markdown="""## Exercise 1.1 · Projecting a point on the track
+
+The Frenet arc length $s$ of a point $\\mathbf{p} = (x, y)$ is that of the closest point of the
+reference curve,
+$$s^\\star = \\arg\\min_s \\lVert \\mathbf{p} - \\mathbf{r}(s) \\rVert^2 ,$$
+and $e_y$ is the signed distance to it, positive to the left:
+$e_y = (\\mathbf{p} - \\mathbf{r}(s^\\star)) \\cdot \\mathbf{n}(s^\\star)$ with the left normal
+$\\mathbf{n} = (-\\sin\\psi, \\cos\\psi)$.
+
+The minimisation has many local minima on a closed track (every bend that comes near the point), so
+search the whole lap coarsely first (samples every metre or so), then refine near the best sample.
+Return $s$ in $[0, L)$.""",
+            header='''def frenet_projection(path, x, y):
+    """Frenet coordinates (s, e_y) of the point (x, y), all in m.
+
+    s is the arc length of the closest point of `path`, in [0, path.length); e_y the signed
+    distance to it, positive to the left of the direction of travel.
+    """''',
+            solution="""    # Global search: the nearest of samples one metre apart (avoids the wrong bend).
+    s_samples = path.sample(ds=1.0)
+    px, py = path.position(s_samples)
+    k = int(np.argmin((px - x) ** 2 + (py - y) ** 2))
+
+    # Local refinement: the distance is smooth near the answer; minimise it within one sample.
+    def dist2(s):
+        cx, cy = path.position(s % path.length)
+        return (cx - x) ** 2 + (cy - y) ** 2
+
+    s0 = s_samples[k]
+    res = minimize_scalar(
+        dist2, bounds=(s0 - 1.0, s0 + 1.0), method="bounded", options={"xatol": 1e-9}
+    )
+    s = res.x % path.length
+    cx, cy = path.position(s)
+    psi = path.heading(s)
+    e_y = -(x - cx) * math.sin(psi) + (y - cy) * math.cos(psi)  # (p - r) . n
+    return s, e_y""",
+            check="check_frenet_projection(frenet_projection)",
+        ),
+        Exercise(
+            markdown="""## Exercise 1.2 · Back to Cartesian coordinates
+
+The inverse map needs no search: a point at arc length $s$ and lateral offset $e_y$ is
+$$\\mathbf{p} = \\mathbf{r}(s) + e_y\\,\\mathbf{n}(s), \\qquad
+\\mathbf{n}(s) = (-\\sin\\psi(s), \\cos\\psi(s)).$$""",
+            header='''def frenet_to_cartesian(path, s, e_y):
+    """Cartesian position (x, y), m, of the point at arc length s and lateral offset e_y (m)."""''',
+            solution="""    cx, cy = path.position(s)
+    psi = path.heading(s)
+    return cx - e_y * math.sin(psi), cy + e_y * math.cos(psi)""",
+            check="check_frenet_to_cartesian(frenet_to_cartesian)",
+        ),
+        Exercise(
+            markdown="""## Exercise 1.3 · The kinematic equations
+
+Write Eq. (2)-(4) of the paper: how fast the Frenet coordinates change for a car with body-frame
+velocities $v_x$, $v_y$ and yaw rate $r$, at heading error $e_\\psi$ and offset $e_y$ from a
+reference of curvature $\\kappa$:
+$$\\dot{s} = \\frac{v_x\\cos e_\\psi - v_y \\sin e_\\psi}{1 - \\kappa\\,e_y},\\qquad
+\\dot{e}_y = v_x \\sin e_\\psi + v_y \\cos e_\\psi,\\qquad
+\\dot{e}_\\psi = r - \\kappa\\,\\dot{s}.$$
+Think about the factor $1/(1 - \\kappa e_y)$ before you run the check: on the inside of a left bend
+($\\kappa > 0$, $e_y > 0$) does the car's projection move faster or slower than the car?""",
+            header='''def frenet_rates(v_x, v_y, r, e_psi, e_y, kappa):
+    """(s_dot, e_y_dot, e_psi_dot) in m/s, m/s, rad/s (paper Eq. 2-4).
+
+    v_x, v_y in m/s, r in rad/s, e_psi in rad, e_y in m, kappa in 1/m (> 0 for a left bend).
+    """''',
+            solution="""    s_dot = (v_x * math.cos(e_psi) - v_y * math.sin(e_psi)) / (1.0 - kappa * e_y)
+    e_y_dot = v_x * math.sin(e_psi) + v_y * math.cos(e_psi)
+    e_psi_dot = r - kappa * s_dot
+    return s_dot, e_y_dot, e_psi_dot""",
+            check="check_frenet_rates(frenet_rates)",
+        ),
+    ],
+    outro="""With all three checks saying "correct", you have rebuilt the geometry that every later
+chapter stands on: the planner works in $(s, e_y, e_\\psi)$, and the MPC projects the car on its plan
+ten times a second.""",
+)
+
+# --------------------------------------------------------------------------------------------------
+# Chapter 02
+
+CH02 = Chapter(
+    name="02_dynamics",
+    title="Exercises 02 · The race-car model",
+    intro="""Chapter 02 built the planning model of the paper term by term. Here you write four of its
+pieces: the slip angles, the tyre force, the axle loads with load transfer, and the change from the
+time domain to the spatial domain that the planner needs. Each check compares your function with
+`racing_lib.model` or `racing_lib.vehicle` on several driving situations.
+
+Parameters come as a `racing_lib.model.ModelParams` `p`: `p.m` (kg), `p.l_f`, `p.l_r`, `p.h_c`
+(m), `p.mu`, `p.g` (m/s^2), Pacejka factors `p.B_f`, `p.C_f`, `p.D_f` (front) and `p.B_r`, ...
+(rear).""",
+    imports="""import math
+
+import numpy as np
+
+import racing_lib.notebook
+from racing_lib.exercises.ch02 import (
+    check_axle_loads,
+    check_slip_angles,
+    check_spatial_dynamics,
+    check_tyre_force,
+)
+from racing_lib.model import X""",
+    exercises=[
+        Exercise(
+            markdown="""## Exercise 2.1 · Slip angles
+
+A tyre makes a lateral force when the direction it rolls in differs from the direction it points in.
+For the bicycle model (paper Eq. 11), with the front wheel steered by $\\delta$:
+$$\\alpha_f = \\delta - \\frac{v_y + l_f\\,r}{v_x}, \\qquad \\alpha_r = -\\frac{v_y - l_r\\,r}{v_x}.$$
+The numerators are the lateral velocities of the two axles: the yaw rate adds $l_f r$ at the front
+and subtracts $l_r r$ at the rear.""",
+            header='''def slip_angles(p, v_x, v_y, r, delta):
+    """(alpha_f, alpha_r), rad, for speeds v_x, v_y (m/s), yaw rate r (rad/s), steering delta (rad)."""''',
+            solution="""    alpha_f = delta - (v_y + p.l_f * r) / v_x
+    alpha_r = -(v_y - p.l_r * r) / v_x
+    return alpha_f, alpha_r""",
+            check="check_slip_angles(slip_angles)",
+        ),
+        Exercise(
+            markdown="""## Exercise 2.2 · The tyre force
+
+The paper's simplified Pacejka law (Eq. 9-10) makes the lateral force proportional to the load
+$F_z$ and shapes it by three factors:
+$$F_y = \\mu\\,F_z\\,D\\,\\sin\\!\\big(C \\arctan(B\\,\\alpha)\\big).$$
+$B$ sets the slope at small slip, $C$ where the force peaks and falls off, $D$ the peak itself.""",
+            header='''def tyre_force(alpha, F_z, mu, B, C, D):
+    """Lateral tyre force F_y, N, at slip angle alpha (rad) and vertical load F_z (N)."""''',
+            solution="""    return mu * F_z * D * math.sin(C * math.atan(B * alpha))""",
+            check="check_tyre_force(tyre_force)",
+            after="""# The force curve of the front axle: linear at first, a peak, then a slow fall.
+import matplotlib.pyplot as plt
+
+from racing_lib.model import ModelParams
+
+p = ModelParams()
+F_zf, _ = p.static_loads()
+alpha = np.linspace(-0.3, 0.3, 301)
+try:
+    force = [tyre_force(a, F_zf, p.mu, p.B_f, p.C_f, p.D_f) for a in alpha]
+    plt.plot(np.degrees(alpha), np.array(force) / 1000)
+    plt.xlabel("slip angle [deg]")
+    plt.ylabel("F_y front [kN]")
+except NotImplementedError:
+    print("plot: not done yet")""",
+        ),
+        Exercise(
+            markdown="""## Exercise 2.3 · Axle loads and load transfer
+
+On a level road the weight $m g$ is shared by the axles in inverse proportion to their distance
+from the centre of gravity, $F_{zf,0} = m g\\,l_r/L$ and $F_{zr,0} = m g\\,l_f/L$ with
+$L = l_f + l_r$. Accelerating at $a_x$ pitches load backwards by (Eq. 12)
+$$\\Delta W = \\frac{m\\,a_x\\,h_c}{L}, \\qquad F_{zf} = F_{zf,0} - \\Delta W, \\quad
+F_{zr} = F_{zr,0} + \\Delta W;$$
+braking ($a_x < 0$) moves it to the front, which is why the front tyres grip better under braking.""",
+            header='''def axle_loads(p, a_x):
+    """(F_zf, F_zr), N, on a level road while accelerating at a_x (m/s^2; < 0 braking)."""''',
+            solution="""    L = p.l_f + p.l_r
+    delta_W = p.m * a_x * p.h_c / L
+    return p.m * p.g * p.l_r / L - delta_W, p.m * p.g * p.l_f / L + delta_W""",
+            check="check_axle_loads(axle_loads)",
+        ),
+        Exercise(
+            markdown="""## Exercise 2.4 · From time to space
+
+The planner integrates the model over the track's arc length $s$ instead of time: the lap time is
+then an integral over a fixed interval, and the track's curvature and width are known functions of
+the integration variable. By the chain rule,
+$$\\frac{\\mathrm{d}\\xi}{\\mathrm{d}s} = \\frac{\\dot\\xi}{\\dot s},$$
+with $\\dot s$ from the kinematics of chapter 01. Use the time-domain model,
+`model.xi_dot(xi, u, kappa=kappa)` (a `racing_lib.model.Model`; it returns $\\dot\\xi$ in the order
+$[v_x, v_y, r, e_\\psi, e_y, s]$, indexed by `X.VX`, ..., `X.S`), and return the derivative with
+respect to $s$. What must its last component be?""",
+            header='''def spatial_dynamics(model, xi, u, kappa):
+    """dxi/ds, shape (6,): the change of each state per metre along the reference.
+
+    xi = [v_x, v_y, r, e_psi, e_y, s], u = [delta, a_x], kappa in 1/m.
+    """''',
+            solution="""    xi_dot = model.xi_dot(xi, u, kappa=kappa)
+    s_dot = xi_dot[X.S]  # the speed of the car's projection along the reference, m/s
+    return xi_dot / s_dot""",
+            check="check_spatial_dynamics(spatial_dynamics)",
+        ),
+    ],
+)
+
+# --------------------------------------------------------------------------------------------------
+# Chapter 03
+
+CH03 = Chapter(
+    name="03_curvature",
+    title="Exercises 03 · Speed profile and the curvature QP",
+    intro="""Chapter 03 planned a fast line in two steps that feed each other: a speed profile for
+the current line, and a QP that bends the line to lower its curvature, linearized around steady
+cornering at that speed. Here you write three of the pieces: the friction limit on speed in a
+corner, the lap time of a speed profile, and the steady-cornering state the QP linearizes around.
+The checks compare with `racing_lib.planning` on the expressway.""",
+    imports="""import math
+
+import numpy as np
+
+import racing_lib.notebook
+from racing_lib.exercises.ch03 import (
+    check_cornering_speed,
+    check_lap_time,
+    check_steady_cornering,
+)""",
+    exercises=[
+        Exercise(
+            markdown="""## Exercise 3.1 · How fast through a corner?
+
+Driving a curve of curvature $\\kappa$ at speed $v$ needs the lateral acceleration $v^2 |\\kappa|$,
+which the tyres can give up to $\\mu g$ (on a level road, ignoring load transfer). So
+$$v_\\max(s) = \\sqrt{\\frac{\\mu\\,g}{|\\kappa(s)|}},$$
+capped at the car's top speed $v_\\text{top}$ (on a straight $\\kappa = 0$ and the tyres set no
+limit). `kappa` is an array with one curvature per node; return one speed per node.""",
+            header='''def cornering_speed(kappa, mu, g, v_top):
+    """Friction-limited speed v_max (m/s) at each curvature kappa (1/m, array), capped at v_top."""''',
+            solution="""    abs_k = np.abs(kappa)
+    with np.errstate(divide="ignore"):
+        v = np.sqrt(mu * g / abs_k)  # inf on straights, where the cap takes over
+    return np.minimum(v, v_top)""",
+            check="check_cornering_speed(cornering_speed)",
+        ),
+        Exercise(
+            markdown="""## Exercise 3.2 · The lap time of a speed profile
+
+A speed profile gives the speed $v_k$ at nodes $s_k$ around a closed loop of length $L$. Between two
+nodes the car accelerates uniformly, so it covers the interval at the mean of the two speeds:
+$$T = \\sum_{k=0}^{N-1} \\frac{2\\,\\Delta s_k}{v_k + v_{k+1}}, \\qquad
+\\Delta s_k = s_{k+1} - s_k,$$
+where the last interval closes the loop: from $s_{N-1}$ back to $s_0 + L$, at speeds $v_{N-1}$ and
+$v_0$.""",
+            header='''def lap_time(s, v, length):
+    """Time (s) to drive the closed loop of `length` (m) at speeds v (m/s) at the nodes s (m)."""''',
+            solution="""    ds = np.diff(np.append(s, s[0] + length))
+    v_next = np.roll(v, -1)
+    return float(np.sum(2.0 * ds / (v + v_next)))""",
+            check="check_lap_time(lap_time)",
+        ),
+        Exercise(
+            markdown="""## Exercise 3.3 · Steady cornering, the QP's linearization point
+
+Each QP iteration linearizes the model around the car cornering steadily on the current line at the
+estimated speed $v$: yaw rate $r = v\\kappa$ and lateral acceleration $a_y = v^2\\kappa$. Each axle
+carries its static share of $a_y$; since the tyre force is proportional to the load, each axle needs
+$$\\mu D \\sin(C\\arctan(B\\alpha)) = a_y / g \\quad\\Rightarrow\\quad
+\\alpha = \\frac{1}{B}\\tan\\!\\Big(\\frac{1}{C}\\arcsin\\frac{a_y}{\\mu D g}\\Big)$$
+(with its own $B, C, D$ front and rear). The slip-angle definitions of exercise 2.1 then give
+$v_y = l_r r - v\\,\\alpha_r$ and $\\delta = \\alpha_f + (v_y + l_f r)/v$.
+The cases of the check stay below the friction limit, so the arcsine exists.""",
+            header='''def steady_state(p, v, kappa):
+    """(v_y, r, delta) in m/s, rad/s, rad of steady cornering at speed v (m/s) on curvature kappa (1/m)."""''',
+            solution="""    r = v * kappa
+    a_y = v * v * kappa
+
+    def slip(B, C, D):
+        return math.tan(math.asin(a_y / (p.g * p.mu * D)) / C) / B
+
+    alpha_f = slip(p.B_f, p.C_f, p.D_f)
+    alpha_r = slip(p.B_r, p.C_r, p.D_r)
+    v_y = p.l_r * r - v * alpha_r
+    delta = alpha_f + (v_y + p.l_f * r) / v
+    return v_y, r, delta""",
+            check="check_steady_cornering(steady_state)",
+        ),
+    ],
+)
+
+# --------------------------------------------------------------------------------------------------
+# Chapter 04
+
+CH04 = Chapter(
+    name="04_time_optimal",
+    title="Exercises 04 · The minimum-lap-time NLP",
+    intro="""Chapter 04 replaced the curvature proxy by the lap time itself, written as an integral
+over the centerline's arc length so that the NLP has a fixed horizon. Here you write that
+objective, and the bound on the slip angles that keeps the planned tyres on the stable side of
+their force peak. The checks compare with `racing_lib.planning.time_optimal` and
+`racing_lib.model`.""",
+    imports="""import math
+
+import numpy as np
+
+import racing_lib.notebook
+from racing_lib.exercises.ch04 import check_peak_slip_angle, check_spatial_lap_time""",
+    exercises=[
+        Exercise(
+            markdown="""## Exercise 4.1 · Lap time in the spatial domain
+
+In the time domain the lap time is the free end of the horizon; in the spatial domain it is an
+integral over the fixed length of the centerline,
+$$T = \\int_0^L \\frac{\\mathrm{d}t}{\\mathrm{d}s}\\,\\mathrm{d}s = \\int_0^L \\frac{1}{\\dot s}\\,
+\\mathrm{d}s, \\qquad \\dot s = \\frac{v_x\\cos e_\\psi - v_y\\sin e_\\psi}{1 - \\kappa\\,e_y}.$$
+On the planning grid, node $k$ has states $v_{x,k}, v_{y,k}, e_{\\psi,k}, e_{y,k}$, the centerline's
+curvature $\\kappa_k$, and `ds[k]` is the distance to node $k+1$ (the last one wraps to node 0).
+Integrate with the trapezoid rule in $1/\\dot s$, as the NLP does:
+$T = \\sum_k \\tfrac{1}{2}\\Delta s_k\\,(1/\\dot s_k + 1/\\dot s_{k+1})$.
+Note how a line on the inside of a bend ($\\kappa e_y > 0$) gains time at the same speed.""",
+            header='''def lap_time(ds, kappa, v_x, v_y, e_psi, e_y):
+    """Lap time (s) of the states at the grid nodes (arrays), trapezoid rule in 1 / s_dot."""''',
+            solution="""    s_dot = (v_x * np.cos(e_psi) - v_y * np.sin(e_psi)) / (1.0 - kappa * e_y)
+    inv = 1.0 / s_dot  # time per metre of centerline, s/m
+    return float(np.sum(0.5 * ds * (inv + np.roll(inv, -1))))""",
+            check="check_spatial_lap_time(lap_time)",
+        ),
+        Exercise(
+            markdown="""## Exercise 4.2 · The peak of the tyre force
+
+Past the peak of its force curve a tyre gives less force for more slip, and a plan that uses that
+region is degenerate and hard to follow. The NLP therefore bounds $|\\alpha|$ by the slip angle of
+the peak. For $F_y = \\mu F_z D \\sin(C\\arctan(B\\alpha))$ the sine is largest where its argument
+is $\\pi/2$; solve for $\\alpha$.""",
+            header='''def peak_slip_angle(B, C):
+    """Slip angle (rad, > 0) at which mu F_z D sin(C atan(B alpha)) is largest (1 < C < 2)."""''',
+            solution="""    return math.tan(math.pi / (2.0 * C)) / B""",
+            check="check_peak_slip_angle(peak_slip_angle)",
+        ),
+    ],
+)
+
+# --------------------------------------------------------------------------------------------------
+# Chapter 05
+
+CH05 = Chapter(
+    name="05_mpc",
+    title="Exercises 05 · The coupled MPC",
+    intro="""Chapter 05 tracks the plan with a model-predictive controller that linearizes the model
+along a *heuristic trajectory* and solves one QP per control period. Here you write that trajectory,
+the discrete model of the steering actuator the QP carries, and the last step from the planned
+acceleration to a pedal position. The checks compare with `racing_lib.control.mpc` and
+`racing_lib.model`.""",
+    imports="""import math
+
+import numpy as np
+
+import racing_lib.notebook
+from racing_lib.exercises.ch05 import (
+    check_heuristic_trajectory,
+    check_pedal_inversion,
+    check_steering_lag,
+)""",
+    exercises=[
+        Exercise(
+            markdown="""## Exercise 5.1 · The heuristic trajectory
+
+Linearizing along the plan alone is poor when the car is off the plan: the model is then evaluated
+where the car is not. Linearizing at the car's state for the whole horizon ignores that the
+controller will bring it back. The paper blends the two: with $\\lambda_k$ falling linearly from 1
+at stage $k = 0$ to 0 at stage $N$,
+$$\\hat\\xi_k = \\xi^\\text{ref}_k + \\lambda_k\\,(\\xi_0 - \\xi^\\text{ref}_0), \\qquad
+\\lambda_k = 1 - k/N .$$
+`xi_ref` has one row per stage, $k = 0, \\dots, N$ (shape $(N+1, 6)$), and `xi0` is the car's
+state (shape $(6,)$).""",
+            header='''def heuristic_trajectory(xi0, xi_ref):
+    """xi_hat, shape (N+1, 6): from the car's state xi0 (6,) blended linearly into xi_ref (N+1, 6)."""''',
+            solution="""    N = xi_ref.shape[0] - 1
+    lam = 1.0 - np.arange(N + 1) / N
+    return xi_ref + lam[:, None] * (xi0 - xi_ref[0])[None, :]""",
+            check="check_heuristic_trajectory(heuristic_trajectory)",
+        ),
+        Exercise(
+            markdown="""## Exercise 5.2 · The steering actuator in the QP
+
+The simulated car's steering follows the command with a first-order lag,
+$\\dot\\delta = (\\delta_\\text{cmd} - \\delta)/\\tau$. Holding the command over one period $\\Delta t$,
+the exact solution gives
+$$\\delta_{k+1} = a\\,\\delta_k + (1 - a)\\,\\delta_\\text{cmd}, \\qquad a = e^{-\\Delta t/\\tau},$$
+and the mean angle over the period, which is what the tyres feel on average, is
+$w\\,\\delta_k + (1-w)\\,\\delta_\\text{cmd}$ with $w = \\frac{\\tau}{\\Delta t}(1 - a)$
+(integrate the exponential over the period to see why).""",
+            header='''def steering_lag(tau, dt):
+    """(a, w): one-period decay and mean-angle weight of a first-order lag tau (s) over dt (s)."""''',
+            solution="""    a = math.exp(-dt / tau)
+    return a, tau / dt * (1.0 - a)""",
+            check="check_steering_lag(steering_lag)",
+        ),
+        Exercise(
+            markdown="""## Exercise 5.3 · From acceleration to pedal
+
+The MPC plans the tyre acceleration $a_x$; the car takes a pedal $u_p \\in [-1, 1]$. The pedal map of
+the paper's Appendix C (with separate throttle and brake slopes) is
+$$a_x = m_0 + m_\\xi \\cdot \\xi + m_\\text{thr} \\max(u_p, 0) + m_\\text{brk} \\min(u_p, 0).$$
+Invert it: compare the requested $a_x$ with what the car does with the pedal released,
+$m_0 + m_\\xi \\cdot \\xi$, and divide the difference by the throttle or the brake slope. Requests
+beyond full throttle or full brake are clipped to $\\pm 1$. The map's coefficients are
+`pedal_map.m_0`, `pedal_map.m_xi` (6 values), `pedal_map.m_thr`, `pedal_map.m_brk`.""",
+            header='''def pedal_for(pedal_map, a_x, xi):
+    """Pedal u_p in [-1, 1] that makes the tyre acceleration a_x (m/s^2) in state xi (6,)."""''',
+            solution="""    coasting = pedal_map.m_0 + float(np.dot(pedal_map.m_xi, xi))
+    excess = a_x - coasting
+    u_p = excess / pedal_map.m_thr if excess >= 0 else excess / pedal_map.m_brk
+    return float(np.clip(u_p, -1.0, 1.0))""",
+            check="check_pedal_inversion(pedal_for)",
+        ),
+    ],
+)
+
+# --------------------------------------------------------------------------------------------------
+# Chapter 06
+
+CH06 = Chapter(
+    name="06_tuning",
+    title="Exercises 06 · Tuning with CMA-ES",
+    intro="""Chapter 06 tunes the MPC's weights with CMA-ES, which only needs a score per closed-loop
+lap. Here you write that score, the paper's tuning objective, and the map from CMA-ES's search
+space (logarithms of the weights) to the weights themselves. The checks compare with
+`racing_lib.tuning` on laps made up for the exercise (`racing_lib.exercises.ch06.synthetic_lap`), so
+no simulation is needed.""",
+    imports="""import numpy as np
+
+import racing_lib.notebook
+from racing_lib.exercises.ch06 import check_search_space, check_tuning_objective, synthetic_lap""",
+    exercises=[
+        Exercise(
+            markdown="""## Exercise 6.1 · The tuning objective
+
+For a completed lap of $N_f$ control steps, the objective (lower is better) is
+$$J = \\max_k |e_{y,k}| + \\frac{1}{N_f}\\sum_k |e_{y,k}| + \\frac{1}{N_f}\\sum_k |v_{x,k} -
+v^\\text{ref}_{x,k}| + w_t\\,t_c - w_s\\,D,$$
+with $t_c$ the time in collision with the track boundary (`metrics.wall_contact_time_s` plus
+`metrics.offtrack_time_s`, s) and $D$ the distance travelled along the track during the lap, m.
+
+The log (`log.ey`, `log.vx`, `log.vx_ref`, `log.s_track`, arrays over all logged steps) includes a
+run-up before the line and a little after it; `log.in_lap` marks the steps of the lap. $D$ is the sum
+of the steps of `log.s_track` between consecutive in-lap samples; `s_track` jumps back by the track
+length where the car crosses the line, so undo that jump. Let us look at one lap first:""",
+            header='''def objective(log, metrics, track_length, w_t, w_s):
+    """The tuning objective J of a completed lap (dimensionless; lower is better)."""''',
+            solution="""    lap = np.asarray(log.in_lap, dtype=bool)
+    ey = np.abs(log.ey[lap])
+    vx_err = np.abs(log.vx[lap] - log.vx_ref[lap])
+    # Steps along the track, with the jump at the start/finish line undone.
+    steps = np.diff(log.s_track)
+    steps = (steps + 0.5 * track_length) % track_length - 0.5 * track_length
+    distance = np.sum(steps[lap[:-1] & lap[1:]])
+    t_c = metrics.wall_contact_time_s + metrics.offtrack_time_s
+    return ey.max() + ey.mean() + vx_err.mean() + w_t * t_c - w_s * distance""",
+            check="check_tuning_objective(objective)",
+        ),
+        Exercise(
+            markdown="""## Exercise 6.2 · The search space
+
+MPC weights matter by their ratios, over orders of magnitude, so CMA-ES searches their base-10
+logarithms: a step of 0.5 means "about three times larger" for every weight alike. A candidate
+$x$ from CMA-ES becomes weights by $w_i = 10^{x_i}$, after clipping $x_i$ into the box
+$[\\log_{10} w_{i,\\min}, \\log_{10} w_{i,\\max}]$. The `space` (a `racing_lib.tuning.SearchSpace`)
+has `space.names`, `space.lower` and `space.upper` (in the weights' own units). Return a dict
+`{name: weight}`.""",
+            header='''def to_params(space, x):
+    """{name: weight} of the CMA-ES point x (log10 of the weights), clipped into the box."""''',
+            solution="""    lo = np.log10(np.asarray(space.lower, dtype=float))
+    hi = np.log10(np.asarray(space.upper, dtype=float))
+    x = np.clip(np.asarray(x, dtype=float), lo, hi)
+    return {name: float(10.0**v) for name, v in zip(space.names, x, strict=True)}""",
+            check="check_search_space(to_params)",
+        ),
+    ],
+)
+
+# A look at the lap before exercise 6.1 (inserted after the markdown of 6.1).
+CH06_PEEK = """log, metrics, length = synthetic_lap(0)
+print(f"{log.t.size} logged steps, {int(log.in_lap.sum())} in the lap, track length {length:.1f} m")
+start = int(np.argmax(log.in_lap))  # first step of the lap
+print("s_track around the line:", np.round(log.s_track[start - 2 : start + 2], 1))"""
+
+CHAPTERS = [CH01, CH02, CH03, CH04, CH05, CH06]
+
+
+def _display_math_apart(text: str) -> str:
+    """Put every $$...$$ equation in a paragraph of its own.
+
+    MyST (the book) reads display math reliably only as a block of its own; JupyterLab renders it
+    either way.
+    """
+    text = re.sub(r"[ \t]*\n?\$\$(.+?)\$\$[ \t]*\n?", r"\n\n$$\1$$\n\n", text, flags=re.S)
+    return re.sub(r"\n{3,}", "\n\n", text).strip("\n")
+
+
+def build(chapter: Chapter, solved: bool) -> nbformat.NotebookNode:
+    """The notebook of one chapter: the template (solved=False) or the solution."""
+
+    def md(text: str) -> nbformat.NotebookNode:
+        return nbformat.v4.new_markdown_cell(_display_math_apart(text))
+
+    code = nbformat.v4.new_code_cell
+    kind = "Solutions" if solved else "Exercises"
+    title = chapter.title.replace("Exercises", kind, 1)
+    cells = [md(f"# {title}\n\n{chapter.intro}")]
+    if solved:
+        cells.append(
+            md(
+                "*This is the solution notebook: every function is filled in and every check says "
+                '"correct". Try the exercises in `exercises/' + chapter.name + ".ipynb` first.*"
+            )
+        )
+    cells.append(code(f"{chapter.imports}\n\n{SETUP}"))
+    for ex in chapter.exercises:
+        cells.append(md(ex.markdown))
+        if chapter is CH06 and ex is CH06.exercises[0]:
+            cells.append(code(CH06_PEEK))
+        body = ex.solution if solved else TODO
+        cells.append(code(f"{ex.header}\n{body}"))
+        cells.append(code(f"{CHECK_MARK}\n{ex.check}"))
+        if ex.after:
+            cells.append(code(ex.after))
+    if chapter.outro:
+        cells.append(md(chapter.outro))
+    nb = nbformat.v4.new_notebook(cells=cells)
+    nb.metadata["kernelspec"] = {
+        "display_name": "Python 3",
+        "language": "python",
+        "name": "python3",
+    }
+    nb.metadata["language_info"] = {"name": "python"}
+    return nb
+
+
+def paths(chapter: Chapter) -> tuple[Path, Path]:
+    """(template, solution) paths of a chapter."""
+    return HERE / f"{chapter.name}.ipynb", HERE / "solutions" / f"{chapter.name}.ipynb"
+
+
+def main(argv: list[str]) -> int:
+    (HERE / "solutions").mkdir(exist_ok=True)
+    for chapter in CHAPTERS:
+        for path, solved in zip(paths(chapter), (False, True), strict=True):
+            nb = build(chapter, solved)
+            if path.exists():
+                old = nbformat.read(path, as_version=4)
+                if [(c.cell_type, c.source) for c in old.cells] == [
+                    (c.cell_type, c.source) for c in nb.cells
+                ]:
+                    continue  # unchanged: keep the file and its checked outputs as they are
+                # Cell ids are random; keep those of an existing file so diffs stay small.
+                if len(old.cells) == len(nb.cells):
+                    for new_cell, old_cell in zip(nb.cells, old.cells, strict=True):
+                        if "id" in old_cell:
+                            new_cell["id"] = old_cell["id"]
+            nbformat.write(nb, path)
+            print(f"{path.relative_to(HERE.parent)} written; run tools/refresh_notebooks.py on it")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))

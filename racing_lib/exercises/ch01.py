@@ -1,0 +1,187 @@
+"""Checks of the exercises of chapter 01 (tracks, the Frenet frame, the kinematic equations).
+
+Exercise notebook: ``exercises/01_frenet.ipynb``. Every check compares the reader's function with
+:mod:`racing_lib.track` or :mod:`racing_lib.model` on the same cases.
+
+* 1.1 :func:`check_frenet_projection`: Cartesian point (x, y) -> Frenet (s, e_y).
+* 1.2 :func:`check_frenet_to_cartesian`: Frenet (s, e_y) -> Cartesian (x, y).
+* 1.3 :func:`check_frenet_rates`: the kinematic equations (paper Eq. 2-4).
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+
+import numpy as np
+
+from racing_lib.exercises.grader import (
+    CheckResult,
+    Wrong,
+    as_float,
+    as_tuple,
+    call,
+    differs,
+    expect_close,
+    grade,
+)
+
+__all__ = ["check_frenet_projection", "check_frenet_rates", "check_frenet_to_cartesian"]
+
+_TRACK = "expressway"
+
+
+@functools.lru_cache(maxsize=1)
+def _track():
+    from racing_lib.track import load_track
+
+    return load_track(_TRACK)
+
+
+def _cases(path, track) -> list[tuple[float, float]]:
+    """(s, e_y) points on the track: straights, corners, both sides, across the start line."""
+    rng = np.random.default_rng(1)
+    s = np.concatenate([[5.0, path.length - 3.0], rng.uniform(0.0, path.length, 8)])
+    side = np.where(np.arange(s.size) % 2 == 0, 1.0, -1.0)
+    width = np.where(side > 0, track.width_left(s), track.width_right(s))
+    e_y = side * rng.uniform(0.2, 0.8, s.size) * width
+    return list(zip(s.tolist(), e_y.tolist(), strict=True))
+
+
+def _side(d: float) -> str:
+    return "left" if d > 0 else "right"
+
+
+def check_frenet_projection(frenet_projection) -> CheckResult:
+    """Exercise 1.1: ``frenet_projection(path, x, y) -> (s, e_y)``.
+
+    ``s`` (m, in [0, length)) is the arc length of the centerline point closest to (x, y) and
+    ``e_y`` (m) the signed distance to it, positive to the left. Compared with
+    :meth:`racing_lib.track.Path.to_frenet` on ten points of the expressway to 1 mm.
+    """
+
+    def body() -> str:
+        track = _track()
+        path = track.centerline
+        for s0, e0 in _cases(path, track):
+            x, y, _ = path.to_cartesian(s0, e0)
+            s_exp, ey_exp, _ = path.to_frenet(x, y)
+            where = f"at (x, y) = ({x:.1f}, {y:.1f}) m"
+            s_got, ey_got = as_tuple(call(frenet_projection, path, x, y), 2, "frenet_projection")
+            s_got = as_float(s_got, "s")
+            ey_got = as_float(ey_got, "e_y")
+
+            # s is compared modulo the lap: 0 m and the lap length are the same point.
+            ds = (s_got - s_exp + 0.5 * path.length) % path.length - 0.5 * path.length
+            if abs(ds) > 1e-3:
+                ahead = "further along the track than" if ds > 0 else "behind"
+                msg = (
+                    f"{where} your projection puts the car {abs(ds):.2f} m {ahead} where it is "
+                    f"(expected s = {s_exp:.2f} m, got {s_got:.2f} m)."
+                )
+                if abs(ds) > 20.0:
+                    msg += " That is another part of the track: search the whole lap first."
+                elif abs(ds) > 0.01:
+                    msg += " Close: refine s so that (x, y) - r(s) is normal to the track."
+                raise Wrong(msg)
+            if differs(ey_got, ey_exp, tol=1e-3):
+                d = ey_got - ey_exp
+                msg = (
+                    f"{where} your projection puts the car {abs(d):.2f} m {_side(d)} of where it "
+                    f"is (expected e_y = {ey_exp:.2f} m, got {ey_got:.2f} m)."
+                )
+                if not differs(-ey_got, ey_exp, tol=1e-3):
+                    msg += " Only the sign is off: e_y is positive LEFT of the direction of travel."
+                raise Wrong(msg)
+        return "all ten points projected to within 1 mm, across the start line and in the corners."
+
+    return grade("1.1 Frenet projection", body, weight=2.0)
+
+
+def check_frenet_to_cartesian(frenet_to_cartesian) -> CheckResult:
+    """Exercise 1.2: ``frenet_to_cartesian(path, s, e_y) -> (x, y)``.
+
+    Compared with :meth:`racing_lib.track.Path.to_cartesian` on ten points to 1 mm.
+    """
+
+    def body() -> str:
+        track = _track()
+        path = track.centerline
+        for s0, e0 in _cases(path, track):
+            x_exp, y_exp, _ = path.to_cartesian(s0, e0)
+            got = as_tuple(call(frenet_to_cartesian, path, s0, e0), 2, "frenet_to_cartesian")
+            x_got, y_got = as_float(got[0], "x"), as_float(got[1], "y")
+            miss = math.hypot(x_got - x_exp, y_got - y_exp)
+            if miss > 1e-3:
+                msg = (
+                    f"for s = {s0:.1f} m, e_y = {e0:.2f} m your point lies {miss:.2f} m from where "
+                    f"the car is (expected (x, y) = ({x_exp:.2f}, {y_exp:.2f}) m, got "
+                    f"({x_got:.2f}, {y_got:.2f}) m)."
+                )
+                x_m, y_m, _ = path.to_cartesian(s0, -e0)
+                x_c, y_c = path.position(s0)
+                if math.hypot(x_got - x_m, y_got - y_m) < 1e-3:
+                    msg += " It is on the wrong side: the normal (-sin psi, cos psi) points left."
+                elif math.hypot(x_got - x_c, y_got - y_c) < 1e-3:
+                    msg += " That is the centerline point: add e_y times the left normal."
+                raise Wrong(msg)
+        return "all ten points placed to within 1 mm."
+
+    return grade("1.2 Frenet to Cartesian", body, weight=1.0)
+
+
+_RATES = ("s_dot", "e_y_dot", "e_psi_dot")
+_RATE_UNITS = {"s_dot": "m/s", "e_y_dot": "m/s", "e_psi_dot": "rad/s"}
+_RATE_MEANING = {
+    "s_dot": "the car advances along the road at",
+    "e_y_dot": "the car drifts sideways (left positive) at",
+    "e_psi_dot": "the car turns relative to the road at",
+}
+
+
+def check_frenet_rates(frenet_rates) -> CheckResult:
+    """Exercise 1.3: the kinematic equations, ``frenet_rates``.
+
+    ``frenet_rates(v_x, v_y, r, e_psi, e_y, kappa) -> (s_dot, e_y_dot, e_psi_dot)``: paper
+    Eq. 2-4, compared with the kinematic rows of
+    :meth:`racing_lib.model.Model.xi_dot` (relative 1e-9).
+    """
+    from racing_lib.model import Model, X
+
+    cases = [
+        # v_x, v_y, r, e_psi, e_y, kappa: straight, inside and outside of bends, drifting
+        (30.0, 0.0, 0.0, 0.0, 0.0, 0.0),
+        (30.0, 0.5, 0.6, 0.05, 4.0, 1.0 / 50.0),
+        (25.0, -0.8, -0.3, -0.1, 3.0, -1.0 / 40.0),
+        (40.0, 1.2, 0.2, 0.15, -5.0, 1.0 / 200.0),
+        (15.0, 0.3, 0.4, -0.3, 2.5, 1.0 / 20.0),
+    ]
+    index = {"s_dot": X.S, "e_y_dot": X.EY, "e_psi_dot": X.EPSI}
+
+    def body() -> str:
+        model = Model()
+        for v_x, v_y, r, e_psi, e_y, kappa in cases:
+            xi = np.array([v_x, v_y, r, e_psi, e_y, 0.0])
+            expected = model.xi_dot(xi, np.zeros(2), kappa=kappa)
+            got = as_tuple(call(frenet_rates, v_x, v_y, r, e_psi, e_y, kappa), 3, "frenet_rates")
+            bend = "a straight" if kappa == 0 else f"a bend of radius {1 / abs(kappa):.0f} m"
+            where = (
+                f"with v_x = {v_x:.0f} m/s, v_y = {v_y:.1f} m/s, r = {r:.2f} rad/s, "
+                f"e_psi = {e_psi:.2f} rad, e_y = {e_y:.1f} m on {bend} "
+                f"({'left' if kappa >= 0 else 'right'}-hand)"
+            )
+            for name, value in zip(_RATES, got, strict=True):
+                g = as_float(value, name)
+                e = float(expected[index[name]])
+                unit = _RATE_UNITS[name]
+                expect_close(
+                    g,
+                    e,
+                    tol=1e-9,
+                    rel=1e-9,
+                    message=f"{where}, your {name} says {_RATE_MEANING[name]} {g:.3f} {unit}; "
+                    f"it is {e:.3f} {unit} (expected {name} = {e:.4f}, got {g:.4f}).",
+                )
+        return "The rates s_dot, e_y_dot and e_psi_dot agree with the model in bends and drifts."
+
+    return grade("1.3 Frenet kinematics", body, weight=1.0)

@@ -1,0 +1,172 @@
+"""Checks of the exercises of chapter 03 (the speed profile and the curvature-optimal QP).
+
+Exercise notebook: ``exercises/03_curvature.ipynb``. Every check compares the reader's function
+with :mod:`racing_lib.planning` on the same cases.
+
+* 3.1 :func:`check_cornering_speed`: the friction limit on speed in a corner (paper Eq. MaxV).
+* 3.2 :func:`check_lap_time`: the time to drive a speed profile.
+* 3.3 :func:`check_steady_cornering`: the linearization point of each QP iteration.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+
+import numpy as np
+
+from racing_lib.exercises.grader import (
+    CheckResult,
+    Wrong,
+    as_array,
+    as_float,
+    as_tuple,
+    call,
+    differs,
+    grade,
+)
+
+__all__ = ["check_cornering_speed", "check_lap_time", "check_steady_cornering"]
+
+_DEG = 180.0 / math.pi
+_SPACING = 5.0  # [m] node spacing of the exercise grid
+
+
+@functools.lru_cache(maxsize=1)
+def _grid() -> tuple[np.ndarray, np.ndarray, float]:
+    """Arc length (m), centerline curvature (1/m) and length (m) of the expressway on a 5 m grid."""
+    from racing_lib.track import load_track
+
+    path = load_track("expressway").centerline
+    s = path.sample(ds=_SPACING)
+    return s, np.asarray(path.curvature(s), dtype=float), path.length
+
+
+def _radius(kappa: float) -> str:
+    return "a straight" if abs(kappa) < 1e-6 else f"a radius of {1.0 / abs(kappa):.0f} m"
+
+
+def check_cornering_speed(cornering_speed) -> CheckResult:
+    """Exercise 3.1: ``cornering_speed(kappa, mu, g, v_top) -> v_max`` (m/s), one per node.
+
+    ``kappa`` is an array of curvatures (1/m). Compared with ``v_max`` of
+    :func:`racing_lib.planning.speed.speed_profile` (a level road, relative 1e-9) along the
+    expressway's centerline.
+    """
+    from racing_lib.model import ModelParams
+    from racing_lib.planning.speed import speed_profile
+
+    def body() -> str:
+        s, kappa, length = _grid()
+        p = ModelParams()
+        v_top = 50.0
+        expected = speed_profile(s, kappa, p, v_top=v_top, length=length).v_max
+        with np.errstate(all="ignore"):
+            raw = call(cornering_speed, kappa.copy(), p.mu, p.g, v_top)
+        arr = np.asarray(raw, dtype=float)
+        if arr.shape == kappa.shape and not np.all(np.isfinite(arr)):
+            k = int(np.flatnonzero(~np.isfinite(arr))[0])
+            raise Wrong(
+                f"at s = {s[k]:.0f} m ({_radius(kappa[k])}, kappa = {kappa[k]:.2g} 1/m) your "
+                f"speed limit is {arr[k]}: on straights the car is limited by its top speed "
+                f"v_top = {v_top:.0f} m/s, not by its tyres."
+            )
+        got = as_array(raw, kappa.shape, "cornering_speed(kappa)")
+        off = np.abs(got - expected) > 1e-9 * expected + 1e-9
+        if np.any(off):
+            k = int(np.argmax(np.abs(got - expected) * off))
+            g, e = float(got[k]), float(expected[k])
+            verb = "faster" if g > e else "slower"
+            msg = (
+                f"at s = {s[k]:.0f} m ({_radius(kappa[k])}) your car corners at {g:.2f} m/s, "
+                f"{abs(g - e):.2f} m/s {verb} than its tyres allow (expected v_max = {e:.2f} m/s, "
+                f"got {g:.2f} m/s)."
+            )
+            if e == v_top and g > v_top:
+                msg += f" On straights the top speed {v_top:.0f} m/s is the limit."
+            elif kappa[k] < 0 and not np.isfinite(g):
+                msg += " Right-hand bends have kappa < 0: use |kappa|."
+            raise Wrong(msg)
+        return (
+            f"the cornering limit agrees with speed_profile at all {s.size} nodes, left and right "
+            "bends and straights."
+        )
+
+    return grade("3.1 Cornering speed limit", body, weight=1.0)
+
+
+def check_lap_time(lap_time) -> CheckResult:
+    """Exercise 3.2: ``lap_time(s, v, length) -> T`` (s) of a speed profile on a closed loop.
+
+    Compared with ``lap_time`` of :func:`racing_lib.planning.speed.speed_profile` (1e-6 s) on two
+    profiles of the expressway (with and without drag).
+    """
+    from racing_lib.model import ModelOptions, ModelParams
+    from racing_lib.planning.speed import speed_profile
+
+    def body() -> str:
+        s, kappa, length = _grid()
+        p = ModelParams()
+        with_drag = speed_profile(s, kappa, p, length=length)
+        no_drag = speed_profile(s, kappa, p, options=ModelOptions(drag=False), length=length)
+        cases = [
+            ("the expressway's speed profile", with_drag.v, with_drag.lap_time),
+            ("the expressway's profile without drag", no_drag.v, no_drag.lap_time),
+        ]
+        for what, v, expected in cases:
+            got = as_float(call(lap_time, s.copy(), v.copy(), length), "lap_time")
+            if differs(got, expected, tol=1e-6):
+                msg = (
+                    f"for {what} your car needs {got:.3f} s for the lap; driving it takes "
+                    f"{expected:.3f} s ({abs(got - expected):.3f} s "
+                    f"{'too long' if got > expected else 'too short'})."
+                )
+                ds = np.diff(np.append(s, length))
+                if not differs(got, float(np.sum(ds / v)), tol=1e-6):
+                    msg += (
+                        " You divided each interval by the speed at its start: use the mean "
+                        "speed of its two ends (uniform acceleration)."
+                    )
+                elif abs(got - expected) < 2.0 * ds[-1] / min(v[-1], v[0]):
+                    msg += " Did you forget the last interval, from the last node back to s = 0?"
+                raise Wrong(msg)
+        return "the lap time agrees with speed_profile to the microsecond."
+
+    return grade("3.2 Lap time of a speed profile", body, weight=1.0)
+
+
+def check_steady_cornering(steady_state) -> CheckResult:
+    """Exercise 3.3: ``steady_state(params, v, kappa) -> (v_y, r, delta)`` of steady cornering.
+
+    Compared with :func:`racing_lib.planning.curvature.steady_cornering` (relative 1e-9) for
+    corners of both directions below the friction limit.
+    """
+    from racing_lib.model import ModelParams
+    from racing_lib.planning.curvature import steady_cornering
+
+    cases = [(30.0, 1 / 200.0), (25.0, -1 / 80.0), (15.0, 1 / 30.0), (40.0, -1 / 400.0)]
+    names = (("v_y", "m/s", 1.0), ("r", "rad/s", 1.0), ("delta", "deg", _DEG))
+
+    def body() -> str:
+        p = ModelParams()
+        for v, kappa in cases:
+            expected = [float(x) for x in steady_cornering(np.array(v), np.array(kappa), p)]
+            got = as_tuple(call(steady_state, p, v, kappa), 3, "steady_state")
+            a_y = v * v * abs(kappa)
+            where = (
+                f"cornering {'left' if kappa > 0 else 'right'} at {v:.0f} m/s on {_radius(kappa)} "
+                f"({a_y / p.g:.2f} g)"
+            )
+            for (name, unit, scale), value, e in zip(names, got, expected, strict=True):
+                g = as_float(value, name)
+                if differs(g, e, tol=1e-9, rel=1e-9):
+                    msg = (
+                        f"{where}, your car has {name} = {g * scale:.4f} {unit}; steady cornering "
+                        f"needs {e * scale:.4f} {unit} (expected {name} = {e:.6f}, got {g:.6f})."
+                    )
+                    if name == "r":
+                        msg += " In steady cornering the car turns with the road: r = v kappa."
+                    raise Wrong(msg)
+        return "v_y, r and delta of steady cornering agree with the library, left and right."
+
+    return grade("3.3 Steady cornering", body, weight=2.0)

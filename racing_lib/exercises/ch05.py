@@ -1,0 +1,177 @@
+"""Checks of the exercises of chapter 05 (the coupled MPC).
+
+Exercise notebook: ``exercises/05_mpc.ipynb``. Every check compares the reader's function with
+:mod:`racing_lib.control.mpc` or :mod:`racing_lib.model` on the same cases.
+
+* 5.1 :func:`check_heuristic_trajectory`: the smoothly blended linearization trajectory
+  ``xi_hat_k = xi_ref_k + lambda_k (xi_0 - xi_ref_0)``.
+* 5.2 :func:`check_steering_lag`: the discrete first-order steering actuator in the QP.
+* 5.3 :func:`check_pedal_inversion`: the pedal that produces the planned a_x (Appendix C).
+"""
+
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+
+from racing_lib.exercises.grader import (
+    CheckResult,
+    Wrong,
+    as_array,
+    as_float,
+    as_tuple,
+    call,
+    differs,
+    grade,
+)
+
+__all__ = ["check_heuristic_trajectory", "check_pedal_inversion", "check_steering_lag"]
+
+_NAMES = ("v_x", "v_y", "r", "e_psi", "e_y", "s")
+_UNITS = ("m/s", "m/s", "rad/s", "rad", "m", "m")
+
+
+@functools.lru_cache(maxsize=1)
+def _mpc():
+    """A coupled MPC on the expressway's centerline plan (built once: about 4 s)."""
+    from racing_lib.control.mpc import CoupledMPC
+    from racing_lib.planning.trajectory import Trajectory
+    from racing_lib.track import load_track
+
+    track = load_track("expressway")
+    return CoupledMPC(Trajectory.from_centerline(track), track=track)
+
+
+def _library_heuristic(mpc, xi0: np.ndarray, xi_ref: np.ndarray) -> np.ndarray:
+    """The heuristic trajectory exactly as CoupledMPC.step builds it."""
+    lam = mpc._lam  # the controller's blending weights lambda_k, k = 0..N
+    return xi_ref + lam[:, None] * (xi0 - xi_ref[0])[None, :]
+
+
+def check_heuristic_trajectory(heuristic_trajectory) -> CheckResult:
+    """Exercise 5.1: ``heuristic_trajectory(xi0, xi_ref) -> xi_hat``, all shape (N+1, 6).
+
+    ``xi0`` (6,) is the car's state, ``xi_ref`` (N+1, 6) the plan at stages 0..N. Compared with the
+    trajectory :class:`racing_lib.control.mpc.CoupledMPC` linearizes along (relative 1e-9).
+    """
+
+    def body() -> str:
+        mpc = _mpc()
+        situations = [
+            # s0, offsets of the car from the plan: (v_x, v_y, r, e_psi, e_y)
+            (400.0, (-3.0, 0.2, 0.05, 0.04, 1.5), "1.5 m left of the plan and 3 m/s slow"),
+            (2900.0, (2.0, -0.4, -0.1, -0.08, -2.0), "2 m right of the plan and 2 m/s fast"),
+            (4000.0, (0.0, 0.0, 0.0, 0.0, 0.0), "exactly on the plan"),
+        ]
+        n = mpc.settings.horizon
+        for s0, offset, what in situations:
+            xi_ref, _, _ = mpc.reference(s0)
+            xi0 = xi_ref[0].copy()
+            xi0[:5] += offset
+            expected = _library_heuristic(mpc, xi0, xi_ref)
+            got = as_array(
+                call(heuristic_trajectory, xi0.copy(), xi_ref.copy()),
+                expected.shape,
+                f"heuristic_trajectory (N + 1 = {n + 1} stages of 6 states)",
+            )
+            err = np.abs(got - expected) - 1e-9 * (1.0 + np.abs(expected))
+            if np.any(err > 0):
+                k, i = np.unravel_index(int(np.argmax(err)), err.shape)
+                g, e = got[k, i], expected[k, i]
+                msg = (
+                    f"with the car {what}, your linearization point at stage k = {k} "
+                    f"({k * mpc.settings.dt:.1f} s ahead) has {_NAMES[i]} = {g:.3f} {_UNITS[i]}; "
+                    f"the controller uses {e:.3f} {_UNITS[i]} (expected xi_hat[{k}, {i}] = "
+                    f"{e:.4f}, got {g:.4f})."
+                )
+                if k == 0:
+                    msg += " At k = 0 the trajectory starts at the car's own state, xi_0."
+                elif k == n:
+                    msg += " At k = N it has blended completely into the plan: xi_hat_N = xi_ref_N."
+                else:
+                    msg += " lambda_k falls linearly from 1 at k = 0 to 0 at k = N."
+                raise Wrong(msg)
+        return (
+            "your heuristic trajectory starts at the car, blends linearly into the plan over the "
+            f"{n} stages and matches CoupledMPC in all three situations."
+        )
+
+    return grade("5.1 Heuristic trajectory", body, weight=2.0)
+
+
+def check_steering_lag(steering_lag) -> CheckResult:
+    """Exercise 5.2: ``steering_lag(tau, dt) -> (a, w)`` of the first-order steering actuator.
+
+    ``delta_{k+1} = a delta_k + (1 - a) delta_cmd`` and the period's mean angle
+    ``w delta_k + (1 - w) delta_cmd``; compared with
+    :func:`racing_lib.control.mpc.steering_lag_coefficients` (relative 1e-9).
+    """
+    from racing_lib.control.mpc import steering_lag_coefficients
+
+    def body() -> str:
+        for tau, dt in ((0.08, 0.1), (0.2, 0.1), (0.05, 0.05), (0.3, 0.02)):
+            a_exp, w_exp = steering_lag_coefficients(tau, dt)
+            a, w = as_tuple(call(steering_lag, tau, dt), 2, "steering_lag")
+            a, w = as_float(a, "a"), as_float(w, "w")
+            actuator = f"with a lag of tau = {tau * 1000:.0f} ms and a period of {dt * 1000:.0f} ms"
+            if differs(a, a_exp, tol=1e-12, rel=1e-9):
+                raise Wrong(
+                    f"{actuator}, your wheels cover {1 - a:.1%} of the way to a new command in "
+                    f"one period; the actuator covers {1 - a_exp:.1%} (expected a = {a_exp:.6f}, "
+                    f"got {a:.6f}). Solve delta_dot = (delta_cmd - delta) / tau over dt exactly."
+                )
+            if differs(w, w_exp, tol=1e-12, rel=1e-9):
+                raise Wrong(
+                    f"{actuator}, your mean steering angle over the period keeps {w:.1%} of the "
+                    f"old angle; the actuator keeps {w_exp:.1%} (expected w = {w_exp:.6f}, got "
+                    f"{w:.6f}). Average the exponential over the period: w = tau / dt (1 - a)."
+                )
+        return "the lag coefficients agree with the controller's for slow and fast actuators."
+
+    return grade("5.2 Steering lag", body, weight=1.0)
+
+
+def check_pedal_inversion(pedal_for) -> CheckResult:
+    """Exercise 5.3: ``pedal_for(pedal_map, a_x, xi) -> u_p`` in [-1, 1].
+
+    The inverse of the pedal map of Appendix C, compared with
+    :meth:`racing_lib.model.PedalMap.pedal` (1e-9), including requests beyond full throttle or
+    full brake (which must be clipped).
+    """
+    from racing_lib.model import PedalMap
+
+    pedal_map = PedalMap(m_0=0.8, m_xi=(-0.05, 0.0, 0.0, 0.0, 0.0, 0.0), m_thr=3.5, m_brk=10.0)
+    cases = [(40.0, 1.0), (40.0, -6.0), (20.0, 0.0), (15.0, 5.0), (50.0, -15.0), (30.0, -0.7)]
+
+    def body() -> str:
+        for v_x, a_x in cases:
+            xi = np.array([v_x, 0.0, 0.0, 0.0, 0.0, 0.0])
+            expected = float(pedal_map.pedal(a_x, xi))
+            got = as_float(call(pedal_for, pedal_map, a_x, xi.copy()), "pedal_for")
+            if differs(got, expected, tol=1e-9):
+                doing = f"{'accelerate' if a_x > 0 else 'brake'} at {abs(a_x):.1f} m/s^2"
+                msg = (
+                    f"to {doing} at {v_x:.0f} m/s your driver sets the pedal to {got:+.3f}; the "
+                    f"map needs {expected:+.3f} (expected u_p = {expected:.4f}, got {got:.4f})."
+                )
+                if abs(expected) == 1.0 and abs(got) > 1.0:
+                    msg += " The pedal ends at +-1: clip requests the car cannot meet."
+                elif not differs(
+                    got,
+                    np.clip(a_x / (pedal_map.m_thr if a_x >= 0 else pedal_map.m_brk), -1, 1),
+                    tol=1e-9,
+                ):
+                    msg += (
+                        " The car accelerates by m_0 + m_xi . xi with the pedal released; "
+                        "the pedal only has to add the difference."
+                    )
+                elif (got >= 0) != (expected >= 0):
+                    msg += (
+                        " Coasting (u_p = 0) already gives m_0 + m_xi . xi; compare a_x with that "
+                        "to choose throttle or brake."
+                    )
+                raise Wrong(msg)
+        return "your pedal inversion agrees with PedalMap.pedal, clipping included."
+
+    return grade("5.3 Pedal from acceleration", body, weight=1.0)

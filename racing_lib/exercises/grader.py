@@ -1,0 +1,302 @@
+"""A small check framework for the course's exercises.
+
+Each exercise asks the reader to write one function; its check calls that function on a few
+cases, compares the answers with what :mod:`racing_lib` computes for the same cases, and returns
+a :class:`CheckResult` whose text says, in physical terms, what is right or wrong ("your
+projection puts the car 0.80 m left of where it is (expected e_y = 1.20 m, got 2.00 m)").
+
+A function that raises :class:`NotImplementedError` or returns ``None`` (the state of every
+template) is reported as "not done yet", never as an error. A function that crashes is reported
+with the exception and the case that triggered it. Each check has a weight (for a score) and a
+time limit (a reader's endless loop should not hang the notebook).
+
+Writing a check (see :mod:`racing_lib.exercises.ch01` for examples)::
+
+    def check_braking_distance(braking_distance):
+        def body():
+            got = as_float(call(braking_distance, 30.0), "braking_distance(30 m/s)")
+            expect_close(got, library_braking_distance(30.0), tol=1e-3,
+                         message="your car stops {absdiff:.1f} m off (expected {expected:.1f} m, "
+                         "got {got:.1f} m)")
+            return "the braking distance agrees with the library"
+        return grade("9.1 Braking distance", body)
+"""
+
+from __future__ import annotations
+
+import math
+import signal
+import threading
+import time
+from collections.abc import Callable, Iterable
+from contextlib import contextmanager
+from dataclasses import dataclass
+from typing import Any, Literal
+
+import numpy as np
+
+__all__ = [
+    "CORRECT",
+    "NOT_DONE",
+    "CheckResult",
+    "NotDone",
+    "Wrong",
+    "as_array",
+    "as_float",
+    "as_tuple",
+    "call",
+    "differs",
+    "expect_close",
+    "grade",
+    "score",
+]
+
+Status = Literal["correct", "wrong", "not done yet", "error", "too slow"]
+
+#: Status of an exercise whose answer matches the library.
+CORRECT: Status = "correct"
+#: Status of an exercise whose function is still the template's (raises NotImplementedError or
+#: returns None).
+NOT_DONE: Status = "not done yet"
+
+#: Default time limit of one check, s.
+TIME_LIMIT = 60.0
+
+
+class NotDone(Exception):
+    """The reader's function has not been written yet."""
+
+
+class Wrong(Exception):
+    """The reader's answer is wrong; the message says how, in physical terms."""
+
+
+class _StudentCrash(Exception):
+    """The reader's function raised an exception (message: which, and on what case)."""
+
+
+class _TimeLimit(Exception):
+    """The check ran longer than its time limit."""
+
+
+@dataclass(frozen=True)
+class CheckResult:
+    """The verdict of one exercise check.
+
+    Attributes
+    ----------
+    exercise : str
+        Number and title of the exercise, e.g. ``"1.1 Frenet projection"``.
+    status : {"correct", "wrong", "not done yet", "error", "too slow"}
+        The verdict.
+    message : str
+        What was checked and, if wrong, what differs (expected vs got, with units).
+    weight : float
+        Points the exercise is worth.
+    seconds : float
+        Run time of the check, s.
+    """
+
+    exercise: str
+    status: Status
+    message: str
+    weight: float = 1.0
+    seconds: float = 0.0
+
+    @property
+    def passed(self) -> bool:
+        """True when the answer is correct."""
+        return self.status == CORRECT
+
+    @property
+    def points(self) -> float:
+        """The weight if correct, else 0."""
+        return self.weight if self.passed else 0.0
+
+    def __str__(self) -> str:
+        # Start the sentence with a capital, unless it starts with a symbol such as v_y.
+        first = self.message.split(" ", 1)[0]
+        message = self.message if "_" in first else self.message[:1].upper() + self.message[1:]
+        return f"Exercise {self.exercise}: {self.status}. {message}"
+
+    # The verdict is the representation, so that a check called as the last line of a notebook
+    # cell shows it without a print().
+    __repr__ = __str__
+
+
+def score(results: Iterable[CheckResult]) -> tuple[float, float]:
+    """Points earned and points possible over some check results."""
+    results = list(results)
+    return sum(r.points for r in results), sum(r.weight for r in results)
+
+
+def _describe_args(args: tuple[Any, ...]) -> str:
+    parts = []
+    for a in args:
+        if isinstance(a, float | int | np.floating | np.integer):
+            parts.append(f"{float(a):.4g}")
+        elif isinstance(a, np.ndarray):
+            parts.append(f"array{a.shape}")
+        else:
+            parts.append(type(a).__name__)
+    return ", ".join(parts)
+
+
+def call(fn: Callable[..., Any], *args: Any, **kwargs: Any) -> Any:
+    """Call the reader's function; turn "not written yet" and crashes into check outcomes.
+
+    Raises
+    ------
+    NotDone
+        ``fn`` raised NotImplementedError or returned None.
+    _StudentCrash
+        ``fn`` raised any other exception (the message names it and the arguments).
+    """
+    if not callable(fn):
+        raise Wrong(f"expected a function, got {type(fn).__name__}; pass the function itself.")
+    try:
+        out = fn(*args, **kwargs)
+    except NotImplementedError:
+        raise NotDone() from None
+    except (_TimeLimit, KeyboardInterrupt):
+        raise
+    except Exception as exc:  # noqa: BLE001 - any error of the reader's code is a verdict
+        name = getattr(fn, "__name__", "function")
+        raise _StudentCrash(
+            f"your {name}({_describe_args(args)}) raised {type(exc).__name__}: {exc}"
+        ) from None
+    if out is None:
+        raise NotDone()
+    return out
+
+
+def as_float(value: Any, what: str) -> float:
+    """``value`` as a finite float, or :class:`Wrong` naming ``what`` was returned."""
+    try:
+        out = float(np.asarray(value, dtype=float).reshape(()))
+    except (TypeError, ValueError):
+        raise Wrong(f"{what} should be one number, got {value!r}.") from None
+    if not math.isfinite(out):
+        raise Wrong(f"{what} is {out}; it should be a finite number.")
+    return out
+
+
+def as_array(value: Any, shape: tuple[int, ...], what: str) -> np.ndarray:
+    """``value`` as a finite float array of ``shape``, or :class:`Wrong`."""
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise Wrong(f"{what} should be an array of numbers, got {type(value).__name__}.") from None
+    if arr.shape != shape:
+        if arr.size == math.prod(shape):
+            arr = arr.reshape(shape)
+        else:
+            raise Wrong(f"{what} should have shape {shape}, got {arr.shape}.")
+    if not np.all(np.isfinite(arr)):
+        raise Wrong(f"{what} contains NaN or infinite values.")
+    return arr
+
+
+def as_tuple(value: Any, n: int, what: str) -> tuple[Any, ...]:
+    """``value`` as a tuple of ``n`` items, or :class:`Wrong` saying what was expected."""
+    if isinstance(value, np.ndarray) and value.shape[:1] == (n,):
+        return tuple(value)
+    if not isinstance(value, tuple | list) or len(value) != n:
+        got = f"{len(value)} values" if isinstance(value, tuple | list) else type(value).__name__
+        raise Wrong(f"{what} should return {n} values, got {got}.")
+    return tuple(value)
+
+
+def differs(got: Any, expected: Any, *, tol: float, rel: float = 0.0) -> bool:
+    """True when any element of ``got`` is off ``expected`` by more than ``tol + rel |expected|``.
+
+    ``tol`` is absolute, in the quantity's unit; NaN in ``got`` always differs.
+    """
+    e = np.atleast_1d(np.asarray(expected, dtype=float))
+    g = np.broadcast_to(np.atleast_1d(np.asarray(got, dtype=float)), e.shape)
+    ok = np.abs(g - e) <= tol + rel * np.abs(e)
+    return not bool(np.all(ok))
+
+
+def expect_close(
+    got: float, expected: float, *, tol: float, message: str, rel: float = 0.0
+) -> None:
+    """Raise :class:`Wrong` when ``got`` is off ``expected`` by more than ``tol + rel |expected|``.
+
+    ``message`` is a template formatted with ``expected``, ``got``, ``diff`` (got - expected) and
+    ``absdiff`` (its size), e.g. ``"your car is {absdiff:.2f} m too far left (expected e_y =
+    {expected:.2f} m, got {got:.2f} m)"``.
+    """
+    if differs(got, expected, tol=tol, rel=rel):
+        g, e = float(got), float(expected)
+        raise Wrong(message.format(expected=e, got=g, diff=g - e, absdiff=abs(g - e)))
+
+
+@contextmanager
+def _time_limit(seconds: float | None):
+    """Interrupt the block after ``seconds`` (POSIX main thread only; elsewhere no limit)."""
+    usable = (
+        seconds is not None
+        and hasattr(signal, "setitimer")
+        and threading.current_thread() is threading.main_thread()
+    )
+    if not usable:
+        yield
+        return
+
+    def _alarm(signum: int, frame: Any) -> None:
+        raise _TimeLimit()
+
+    previous = signal.signal(signal.SIGALRM, _alarm)
+    signal.setitimer(signal.ITIMER_REAL, seconds)
+    try:
+        yield
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0.0)
+        signal.signal(signal.SIGALRM, previous)
+
+
+def grade(
+    exercise: str,
+    body: Callable[[], str],
+    *,
+    weight: float = 1.0,
+    time_limit: float | None = TIME_LIMIT,
+) -> CheckResult:
+    """Run one check and turn its outcome into a :class:`CheckResult`.
+
+    Parameters
+    ----------
+    exercise : str
+        Number and title of the exercise.
+    body : callable
+        Runs the cases; returns a sentence saying what was verified when all pass; raises
+        :class:`Wrong` (via :func:`expect_close` etc.) at the first wrong answer and lets
+        :class:`NotDone` from :func:`call` through.
+    weight : float
+        Points of the exercise.
+    time_limit : float or None
+        Seconds before the check gives up ("too slow"); None for no limit.
+    """
+    tic = time.perf_counter()
+
+    def result(status: Status, message: str) -> CheckResult:
+        return CheckResult(exercise, status, message, weight, time.perf_counter() - tic)
+
+    try:
+        with _time_limit(time_limit):
+            note = body()
+    except NotDone:
+        return result(
+            NOT_DONE, "Replace `raise NotImplementedError` with your code, then run this again."
+        )
+    except Wrong as exc:
+        return result("wrong", str(exc))
+    except _StudentCrash as exc:
+        return result("error", f"{exc}.")
+    except _TimeLimit:
+        return result(
+            "too slow",
+            f"the check did not finish within {time_limit:.0f} s; look for a loop that never ends.",
+        )
+    return result(CORRECT, note or "all cases agree with racing_lib.")

@@ -1,0 +1,354 @@
+"""The exercises: notebooks in sync with their generator, checks that accept the solutions and
+reject plausible wrong answers with a message in physical terms, and the grader's verdicts.
+
+The notebooks themselves run under nbval (``pytest exercises``): their check cells are marked
+``# NBVAL_CHECK_OUTPUT``, so nbval verifies that every template still says "not done yet" and
+every solution says "correct"; the tests here check the stored outputs say so.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import math
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from racing_lib.exercises import ch01, ch02, ch03, ch04, ch05, ch06, grader
+
+REPO = Path(__file__).resolve().parents[1]
+EXERCISES = REPO / "exercises"
+CHECK_MARK = "# NBVAL_CHECK_OUTPUT"
+
+
+def _generator():
+    spec = importlib.util.spec_from_file_location("make_notebooks", EXERCISES / "make_notebooks.py")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules["make_notebooks"] = module  # dataclasses look their module up while being built
+    spec.loader.exec_module(module)
+    return module
+
+
+GEN = _generator()
+CHAPTERS = {c.name: c for c in GEN.CHAPTERS}
+
+
+def _sources(path: Path) -> list[tuple[str, str]]:
+    nb = json.loads(path.read_text())
+    return [(c["cell_type"], "".join(c["source"])) for c in nb["cells"]]
+
+
+def _check_outputs(path: Path) -> list[str]:
+    """The text of every checked cell's output, in order."""
+    nb = json.loads(path.read_text())
+    texts = []
+    for cell in nb["cells"]:
+        if cell["cell_type"] == "code" and CHECK_MARK in "".join(cell["source"]):
+            text = ""
+            for out in cell.get("outputs", []):
+                text += "".join(out.get("data", {}).get("text/plain", out.get("text", "")))
+            texts.append(text)
+    return texts
+
+
+@pytest.mark.parametrize("name", sorted(CHAPTERS))
+def test_notebooks_are_what_the_generator_writes(name):
+    """Templates and solutions come from one source; an edit to one notebook alone is caught."""
+    chapter = CHAPTERS[name]
+    for path, solved in zip(GEN.paths(chapter), (False, True), strict=True):
+        assert path.exists(), f"{path} is missing; run python exercises/make_notebooks.py"
+        built = [(c.cell_type, c.source) for c in GEN.build(chapter, solved).cells]
+        assert _sources(path) == built, (
+            f"{path.name} differs from exercises/make_notebooks.py; edit the generator, then run "
+            "it and tools/refresh_notebooks.py"
+        )
+
+
+@pytest.mark.parametrize("name", sorted(CHAPTERS))
+def test_stored_verdicts_template_not_done_solution_correct(name):
+    chapter = CHAPTERS[name]
+    template, solution = GEN.paths(chapter)
+    n = len(chapter.exercises)
+    assert 2 <= n <= 4, f"{name}: a chapter has two to four exercises"
+    t_out, s_out = _check_outputs(template), _check_outputs(solution)
+    assert len(t_out) == len(s_out) == n
+    for text in t_out:
+        assert ": not done yet." in text, f"{template.name}: {text!r}"
+    for text in s_out:
+        assert ": correct." in text, f"{solution.name}: {text!r}"
+
+
+def _solutions(name: str) -> dict:
+    """The reader's functions as the solution notebook defines them (its code cells, run here)."""
+    chapter = CHAPTERS[name]
+    namespace: dict = {}
+    exec(chapter.imports, namespace)  # noqa: S102 - our own notebook code
+    for ex in chapter.exercises:
+        exec(f"{ex.header}\n{ex.solution}", namespace)  # noqa: S102
+    return namespace
+
+
+@pytest.mark.parametrize("name", sorted(CHAPTERS))
+def test_solutions_pass_their_checks(name):
+    namespace = _solutions(name)
+    for ex in CHAPTERS[name].exercises:
+        result = eval(ex.check, namespace)  # noqa: S307 - our own check call
+        assert result.status == grader.CORRECT, str(result)
+
+
+@pytest.mark.parametrize("name", sorted(CHAPTERS))
+def test_templates_report_not_done(name):
+    """Each check says "not done yet" for the template's function (raising NotImplementedError)."""
+    chapter = CHAPTERS[name]
+    namespace: dict = {}
+    exec(chapter.imports, namespace)  # noqa: S102
+    for ex in chapter.exercises:
+        exec(f"{ex.header}\n{GEN.TODO}", namespace)  # noqa: S102
+        result = eval(ex.check, namespace)  # noqa: S307
+        assert result.status == grader.NOT_DONE, str(result)
+        assert "not done yet" in str(result)
+
+
+# --------------------------------------------------------------------------------------------------
+# Plausible wrong answers are rejected, with expected vs got in physical terms
+
+
+def _wrong(result, *fragments: str) -> None:
+    assert result.status == "wrong", str(result)
+    for fragment in fragments:
+        assert fragment in str(result), f"{fragment!r} not in {str(result)!r}"
+
+
+def test_projection_with_the_sign_of_e_y_flipped():
+    frenet_projection = _solutions("01_frenet")["frenet_projection"]
+
+    def flipped(path, x, y):
+        s, e_y = frenet_projection(path, x, y)
+        return s, -e_y
+
+    _wrong(ch01.check_frenet_projection(flipped), "right of where it is", "expected e_y", "got")
+
+
+def test_projection_that_only_searches_samples():
+    """Nearest sample, no refinement: s off by up to half a sample spacing."""
+
+    def nearest_sample(path, x, y):
+        s = path.sample(ds=2.0)
+        px, py = path.position(s)
+        k = int(np.argmin((px - x) ** 2 + (py - y) ** 2))
+        cx, cy = path.position(s[k])
+        psi = path.heading(s[k])
+        return s[k], -(x - cx) * math.sin(psi) + (y - cy) * math.cos(psi)
+
+    _wrong(ch01.check_frenet_projection(nearest_sample), "expected s =", "m")
+
+
+def test_cartesian_point_on_the_wrong_side():
+    def right_normal(path, s, e_y):
+        cx, cy = path.position(s)
+        psi = path.heading(s)
+        return cx + e_y * math.sin(psi), cy - e_y * math.cos(psi)
+
+    _wrong(ch01.check_frenet_to_cartesian(right_normal), "wrong side")
+
+
+def test_kinematics_without_the_curvature_factor():
+    def no_factor(v_x, v_y, r, e_psi, e_y, kappa):
+        s_dot = v_x * math.cos(e_psi) - v_y * math.sin(e_psi)
+        return s_dot, v_x * math.sin(e_psi) + v_y * math.cos(e_psi), r - kappa * s_dot
+
+    _wrong(ch01.check_frenet_rates(no_factor), "s_dot", "m/s", "expected s_dot")
+
+
+def test_slip_angles_with_swapped_lever_arms():
+    def swapped(p, v_x, v_y, r, delta):
+        return delta - (v_y + p.l_r * r) / v_x, -(v_y - p.l_f * r) / v_x
+
+    _wrong(ch02.check_slip_angles(swapped), "slip angle", "deg", "expected alpha_")
+
+
+def test_tyre_force_without_the_arctan():
+    def linear_inside(alpha, F_z, mu, B, C, D):
+        return mu * F_z * D * math.sin(C * B * alpha)
+
+    _wrong(ch02.check_tyre_force(linear_inside), "push sideways", "N")
+
+
+def test_load_transfer_the_wrong_way():
+    def backwards(p, a_x):
+        L = p.l_f + p.l_r
+        dW = p.m * a_x * p.h_c / L
+        return p.m * p.g * p.l_r / L + dW, p.m * p.g * p.l_f / L - dW
+
+    _wrong(ch02.check_axle_loads(backwards), "kN", "wrong way")
+
+
+def test_spatial_dynamics_divided_by_v_x():
+    """Dividing by v_x instead of s_dot: right on the centerline of a straight, wrong elsewhere."""
+    from racing_lib.model import X
+
+    def by_vx(model, xi, u, kappa):
+        return model.xi_dot(xi, u, kappa=kappa) / xi[X.VX]
+
+    _wrong(ch02.check_spatial_dynamics(by_vx), "per metre of track")
+
+
+def test_cornering_speed_without_friction_coefficient():
+    def no_mu(kappa, mu, g, v_top):
+        with np.errstate(divide="ignore"):
+            return np.minimum(np.sqrt(g / np.abs(kappa)), v_top)
+
+    _wrong(ch03.check_cornering_speed(no_mu), "slower than its tyres allow", "m/s")
+
+
+def test_cornering_speed_without_top_speed():
+    def uncapped(kappa, mu, g, v_top):
+        with np.errstate(divide="ignore"):
+            return np.sqrt(mu * g / np.abs(kappa))
+
+    _wrong(ch03.check_cornering_speed(uncapped), "top speed")
+
+
+def test_lap_time_with_the_speed_at_the_start_of_each_interval():
+    def left_rule(s, v, length):
+        return float(np.sum(np.diff(np.append(s, s[0] + length)) / v))
+
+    _wrong(ch03.check_lap_time(left_rule), "mean speed")
+
+
+def test_lap_time_without_the_closing_interval():
+    def open_loop(s, v, length):
+        return float(np.sum(2.0 * np.diff(s) / (v[:-1] + v[1:])))
+
+    _wrong(ch03.check_lap_time(open_loop), "last interval")
+
+
+def test_steady_cornering_kinematic_guess():
+    def kinematic(p, v, kappa):
+        return 0.0, v * kappa, (p.l_f + p.l_r) * kappa
+
+    _wrong(ch03.check_steady_cornering(kinematic), "steady cornering needs", "v_y")
+
+
+def test_spatial_lap_time_without_the_offset_factor():
+    def centerline_speed(ds, kappa, v_x, v_y, e_psi, e_y):
+        inv = 1.0 / (v_x * np.cos(e_psi) - v_y * np.sin(e_psi))
+        return float(np.sum(0.5 * ds * (inv + np.roll(inv, -1))))
+
+    _wrong(ch04.check_spatial_lap_time(centerline_speed), "1 - kappa e_y", "s")
+
+
+def test_peak_slip_angle_without_the_tangent():
+    _wrong(ch04.check_peak_slip_angle(lambda B, C: math.pi / (2.0 * C) / B), "peaks at", "deg")
+
+
+def test_heuristic_trajectory_blending_too_slowly():
+    def off_by_one(xi0, xi_ref):
+        n = xi_ref.shape[0] - 1
+        lam = 1.0 - np.arange(n + 1) / (n + 1)  # never reaches 0
+        return xi_ref + lam[:, None] * (xi0 - xi_ref[0])[None, :]
+
+    _wrong(ch05.check_heuristic_trajectory(off_by_one), "blended completely")
+
+
+def test_heuristic_trajectory_that_is_the_plan():
+    _wrong(ch05.check_heuristic_trajectory(lambda xi0, xi_ref: xi_ref), "car's own state")
+
+
+def test_steering_lag_with_an_euler_step():
+    def euler(tau, dt):
+        a = 1.0 - dt / tau
+        return a, tau / dt * (1.0 - a)
+
+    _wrong(ch05.check_steering_lag(euler), "of the way to a new command")
+
+
+def test_pedal_without_the_coasting_term():
+    def no_base(pedal_map, a_x, xi):
+        u = a_x / pedal_map.m_thr if a_x >= 0 else a_x / pedal_map.m_brk
+        return float(np.clip(u, -1.0, 1.0))
+
+    _wrong(ch05.check_pedal_inversion(no_base), "pedal released")
+
+
+def test_objective_without_collision_time():
+    def no_collision(log, metrics, track_length, w_t, w_s):
+        lap = log.in_lap
+        ey = np.abs(log.ey[lap])
+        steps = np.diff(log.s_track)
+        steps = (steps + 0.5 * track_length) % track_length - 0.5 * track_length
+        dist = np.sum(steps[lap[:-1] & lap[1:]])
+        return ey.max() + ey.mean() + np.abs(log.vx - log.vx_ref)[lap].mean() - w_s * dist
+
+    _wrong(ch06.check_tuning_objective(no_collision), "collision time")
+
+
+def test_objective_with_the_line_jump_left_in():
+    def raw_distance(log, metrics, track_length, w_t, w_s):
+        lap = log.in_lap
+        ey = np.abs(log.ey[lap])
+        dist = np.sum(np.diff(log.s_track)[lap[:-1] & lap[1:]])
+        t_c = metrics.wall_contact_time_s + metrics.offtrack_time_s
+        vx = np.abs(log.vx - log.vx_ref)[lap].mean()
+        return ey.max() + ey.mean() + vx + w_t * t_c - w_s * dist
+
+    # The wrap happens just before the first in-lap step, so the raw distance is right here...
+    result = ch06.check_tuning_objective(raw_distance)
+    # ...and the check must not call it wrong for that; forgetting D altogether is wrong:
+    assert result.status == grader.CORRECT, str(result)
+
+    def no_distance(log, metrics, track_length, w_t, w_s):
+        return raw_distance(log, metrics, track_length, w_t, 0.0)
+
+    _wrong(ch06.check_tuning_objective(no_distance), "distance")
+
+
+def test_search_space_without_clipping():
+    def unclipped(space, x):
+        return {n: float(10.0**v) for n, v in zip(space.names, x, strict=True)}
+
+    _wrong(ch06.check_search_space(unclipped), "outside the box")
+
+
+# --------------------------------------------------------------------------------------------------
+# The grader's verdicts
+
+
+def test_none_and_not_implemented_are_not_done():
+    def todo(path, x, y):
+        raise NotImplementedError
+
+    for fn in (todo, lambda path, x, y: None):
+        assert ch01.check_frenet_projection(fn).status == grader.NOT_DONE
+
+
+def test_a_crash_is_reported_with_the_exception():
+    result = ch01.check_frenet_rates(lambda *args: 1 / 0)
+    assert result.status == "error"
+    assert "ZeroDivisionError" in str(result)
+
+
+def test_wrong_number_of_return_values():
+    result = ch01.check_frenet_to_cartesian(lambda path, s, e_y: (1.0, 2.0, 3.0))
+    _wrong(result, "2 values")
+
+
+def test_time_limit():
+    def slow() -> str:
+        time.sleep(5.0)
+        return "done"
+
+    tic = time.perf_counter()
+    result = grader.grade("0.0 slow", slow, time_limit=0.3)
+    assert result.status == "too slow"
+    assert time.perf_counter() - tic < 3.0
+
+
+def test_score_weights_correct_answers_only():
+    ok = grader.CheckResult("1", grader.CORRECT, "", weight=2.0)
+    bad = grader.CheckResult("2", "wrong", "", weight=1.0)
+    assert grader.score([ok, bad]) == (2.0, 3.0)
