@@ -129,3 +129,20 @@ def test_trials_through_an_executor_match_serial(circle):
     expected = [circle.length / v for v in (20.0, 21.0, 22.0)]
     assert summary["lap_time_min_s"] == pytest.approx(min(expected), rel=1e-9)
     assert summary["lap_time_mean_s"] == pytest.approx(np.mean(expected), rel=1e-9)
+
+
+@pytest.mark.parametrize("name", ["expressway", "shortcut"])
+def test_nominal_controller_laps_each_builtin_track_cleanly(name):
+    """Chapter 01's lap: the centerline at a moderate speed, no wall contact, nothing off track."""
+    from racing_lib.control.nominal import MODERATE_SPEED_SCALE
+    from racing_lib.experiment import LapSpec, drive_lap
+    from racing_lib.planning.trajectory import Trajectory
+    from racing_lib.track import load_track
+
+    track = load_track(name)
+    reference = Trajectory.from_centerline(track).scale_speed(MODERATE_SPEED_SCALE)
+    m = drive_lap(LapSpec(track=track, trajectory=reference, controller="nominal"), seed=3).metrics
+    assert m.completed
+    assert m.wall_contacts == 0 and m.offtrack_time_s == 0.0
+    assert m.lap_time_s == pytest.approx(reference.lap_time, rel=0.03)
+    assert m.ey_max_m < 3.0
