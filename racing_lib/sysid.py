@@ -74,6 +74,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import functools
 import json
 import math
 import sys
@@ -1317,21 +1318,26 @@ def identify(
     )
 
 
+def _shipped_fit() -> dict[str, Any]:
+    """The JSON of the shipped fit (``racing_lib/data/identified_params.json``)."""
+    ref = resources.files("racing_lib") / "data" / _DATA_FILE
+    try:
+        return json.loads(ref.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise ModelError(
+            f"racing_lib/data/{_DATA_FILE} is missing; regenerate it with "
+            "`python -m racing_lib.sysid`."
+        ) from None
+
+
+@functools.cache
 def identified_params() -> ModelParams:
     """The shipped identified parameter set (``racing_lib/data/identified_params.json``).
 
     The default parameter set of the chapters after notebook 02, so that they need not refit.
     Regenerate it with ``python -m racing_lib.sysid``.
     """
-    ref = resources.files("racing_lib") / "data" / _DATA_FILE
-    try:
-        data = json.loads(ref.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise ModelError(
-            f"racing_lib/data/{_DATA_FILE} is missing; regenerate it with "
-            "`python -m racing_lib.sysid`."
-        ) from None
-    return ModelParams.from_dict(data["model_params"])
+    return ModelParams.from_dict(_shipped_fit()["model_params"])
 
 
 def identified_steer_tau() -> float:
@@ -1341,15 +1347,7 @@ def identified_steer_tau() -> float:
     MPC and the open-loop predictions of notebook 02 use it to turn commands into road-wheel
     angles (see :func:`lagged_steering`).
     """
-    ref = resources.files("racing_lib") / "data" / _DATA_FILE
-    try:
-        data = json.loads(ref.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise ModelError(
-            f"racing_lib/data/{_DATA_FILE} is missing; regenerate it with "
-            "`python -m racing_lib.sysid`."
-        ) from None
-    return float(data["steer_tau"])
+    return float(_shipped_fit()["steer_tau"])
 
 
 def run(seed: int = 0, fast: bool | None = None, out: str | None = None) -> IdentificationResult:

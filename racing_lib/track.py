@@ -22,7 +22,6 @@ from __future__ import annotations
 import hashlib
 import math
 import os
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path as _FsPath
 from typing import Literal
@@ -33,6 +32,7 @@ from scipy.interpolate import CubicSpline
 from scipy.spatial import cKDTree
 
 from racing_lib.errors import TrackError
+from racing_lib.io import atomic_write_text
 
 __all__ = [
     "CSV_COLUMNS",
@@ -1029,21 +1029,11 @@ def _read_csv_rows(fpath: _FsPath) -> tuple[list[tuple[int, list[float]]], bool]
 
 
 def _atomic_write_text(target: _FsPath, text: str) -> None:
-    """Write text to target through a temporary file in the same folder and os.replace."""
+    """Write text to ``target`` atomically, with a clear error if its folder does not exist."""
     folder = target.parent if str(target.parent) else _FsPath(".")
     if not folder.is_dir():
         raise TrackError(f"Cannot write {str(target)!r}: folder {str(folder)!r} does not exist.")
-    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=folder)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8", newline="\n") as fh:
-            fh.write(text)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, target)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    atomic_write_text(target, text)
 
 
 # --------------------------------------------------------------------------------------------
