@@ -550,6 +550,36 @@ def _smooth_max(x: Any, lower: float, width: float) -> Any:
     return 0.5 * (x + lower + ca.sqrt((x - lower) ** 2 + width**2))
 
 
+def frenet_kinematics(
+    v_x: Any, v_y: Any, r: Any, e_psi: Any, e_y: Any, kappa: Any, ops: Any = ca
+) -> tuple[Any, Any, Any]:
+    """The Frenet kinematics of the paper's Eq. (2)-(4), for any math backend.
+
+    The one definition of these rows: the model's dynamics use it, and so does any other model
+    written in Frenet coordinates (the best-lap planner on the simulated car's equations).
+
+    Parameters
+    ----------
+    v_x, v_y : float, array or casadi expression
+        Body-frame velocities, m/s.
+    r : float, array or casadi expression
+        Yaw rate, rad/s.
+    e_psi, e_y : float, array or casadi expression
+        Heading error (rad) and lateral offset (m, left positive) to the reference line.
+    kappa : float, array or casadi expression
+        Curvature of the reference line at the car's s, 1/m.
+    ops : module
+        Provides ``sin`` and ``cos``: ``casadi`` (default), ``numpy`` or ``math``.
+
+    Returns
+    -------
+    s_dot, e_psi_dot, e_y_dot
+        Progress along the line (m/s), heading-error rate (rad/s), lateral rate (m/s).
+    """
+    s_dot = (v_x * ops.cos(e_psi) - v_y * ops.sin(e_psi)) / (1 - kappa * e_y)
+    return s_dot, r - kappa * s_dot, v_x * ops.sin(e_psi) + v_y * ops.cos(e_psi)
+
+
 def _equations(
     xi: ca.SX, u: ca.SX, kappa: ca.SX, theta: ca.SX, p: ModelParams, o: ModelOptions
 ) -> tuple[ca.SX, dict[str, ca.SX]]:
@@ -558,10 +588,7 @@ def _equations(
     delta, a_x = u[U.DELTA], u[U.AX]
     L = p.wheelbase
 
-    # Frenet kinematics, Eq. (2)-(4)
-    s_dot = (v_x * ca.cos(e_psi) - v_y * ca.sin(e_psi)) / (1 - kappa * e_y)
-    e_psi_dot = r - kappa * s_dot
-    e_y_dot = v_x * ca.sin(e_psi) + v_y * ca.cos(e_psi)
+    s_dot, e_psi_dot, e_y_dot = frenet_kinematics(v_x, v_y, r, e_psi, e_y, kappa, ca)
 
     # Slip angles, Eq. (11), with a guarded v_x so standstill does not divide by zero
     v_x_safe = _smooth_max(v_x, VX_GUARD, VX_GUARD_WIDTH)
