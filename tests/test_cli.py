@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 
+import numpy as np
 import pytest
 
 from racing_lib.cli import main
@@ -69,3 +70,26 @@ def test_a_broken_csv_is_one_clear_error(capsys, tmp_path):
     err = capsys.readouterr().err
     assert code == 2
     assert "bad.csv" in err and "Traceback" not in err
+
+
+def test_plan_json_has_the_documented_fields(capsys, tmp_path):
+    # A small oval written as a racetrack-database CSV: the command works on any track file.
+    t = np.linspace(0.0, 2.0 * np.pi, 120, endpoint=False)
+    rows = "\n".join(f"{220 * np.cos(a):.4f},{90 * np.sin(a):.4f},6.0,6.0" for a in t)
+    csv = tmp_path / "oval.csv"
+    csv.write_text("# x_m,y_m,w_tr_right_m,w_tr_left_m\n" + rows + "\n")
+    out = tmp_path / "plan.csv"
+    code = main(["plan", "--track", str(csv), "--method", "curvature", "--json", "--out", str(out)])
+    report = json.loads(capsys.readouterr().out)
+    assert code == 0
+    fields = {"track", "method", "length_m", "nodes", "lap_time_s", "solve_time_s", "iterations",
+              "status"}  # fmt: skip
+    assert set(report) == fields
+    assert report["method"] == "curvature" and report["nodes"] > 100
+    assert out.exists()
+    # The plan file drives a lap of the same track, and is refused on another one.
+    assert main(["lap", "--track", str(csv), "--plan", str(out), "--controller", "nominal",
+                 "--json"]) == 0  # fmt: skip
+    capsys.readouterr()
+    assert main(["lap", "--plan", str(out), "--controller", "nominal", "--json"]) == 2
+    assert "oval" in capsys.readouterr().err
