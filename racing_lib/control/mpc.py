@@ -759,6 +759,32 @@ class _MPCBase:
         """How often each solver status caused a fallback in this lap."""
         return dict(self._statuses)
 
+    def _conclude(self, u_plan: np.ndarray | None, status: str, xi0: np.ndarray,
+                  u_ref0: np.ndarray) -> Command:  # fmt: skip
+        """Apply the first input of a solved plan (keeping the rest for fallbacks), or fall back.
+
+        ``u_plan`` is the optimal input sequence, shape (N, 2), or None when the QP failed.
+        """
+        if u_plan is None:
+            return self._fallback(xi0, u_ref0, status)
+        self._shift_buffer = [u_plan[k] for k in range(1, len(u_plan))]
+        u0 = u_plan[0]
+        return self._apply(self._clip_steer(u0[U.DELTA]), float(u0[U.AX]), xi0)
+
+    def _record_timing(self, t0: float, t1: float, t2: float, t3: float, t3b: float,
+                       t4: float) -> None:  # fmt: skip
+        """Store the time of each part of the step just taken (s), for the benchmarks."""
+        t5 = time.perf_counter()
+        self.last_timing = {
+            "project": t1 - t0,
+            "reference": t2 - t1,
+            "linearize": t3 - t2,
+            "build": t3b - t3,
+            "qp": t4 - t3b,
+            "pedal": t5 - t4,
+            "total": t5 - t0,
+        }
+
 
 class CoupledMPC(_MPCBase):
     """The paper's coupled MPC: one QP for steering and longitudinal acceleration.
@@ -871,22 +897,8 @@ class CoupledMPC(_MPCBase):
         t4 = time.perf_counter()
         self.last_qp_data = data
         self.last_solution = sol
-        if sol.success:
-            u0 = sol.u[0]
-            self._shift_buffer = [sol.u[k] for k in range(1, N)]
-            cmd = self._apply(self._clip_steer(u0[U.DELTA]), float(u0[U.AX]), xi0)
-        else:
-            cmd = self._fallback(xi0, u_ref[0], sol.status)
-        t5 = time.perf_counter()
-        self.last_timing = {
-            "project": t1 - t0,
-            "reference": t2 - t1,
-            "linearize": t3 - t2,
-            "build": t3b - t3,
-            "qp": t4 - t3b,
-            "pedal": t5 - t4,
-            "total": t5 - t0,
-        }
+        cmd = self._conclude(sol.u if sol.success else None, sol.status, xi0, u_ref[0])
+        self._record_timing(t0, t1, t2, t3, t3b, t4)
         return cmd
 
 
@@ -994,21 +1006,9 @@ class DecoupledMPC(_MPCBase):
         sol_lat = self.qp_lat.solve(lat)
         t4 = time.perf_counter()
         self.last_solution = sol_lat
-        if sol_lon.success and sol_lat.success:
-            u = np.column_stack([sol_lat.u[:, 0], sol_lon.u[:, 0]])
-            self._shift_buffer = [u[k] for k in range(1, N)]
-            cmd = self._apply(self._clip_steer(u[0, U.DELTA]), float(u[0, U.AX]), xi0)
-        else:
-            status = sol_lat.status if not sol_lat.success else sol_lon.status
-            cmd = self._fallback(xi0, u_ref[0], status)
-        t5 = time.perf_counter()
-        self.last_timing = {
-            "project": t1 - t0,
-            "reference": t2 - t1,
-            "linearize": t3 - t2,
-            "build": t3b - t3,
-            "qp": t4 - t3b,
-            "pedal": t5 - t4,
-            "total": t5 - t0,
-        }
+        ok = sol_lon.success and sol_lat.success
+        u = np.column_stack([sol_lat.u[:, 0], sol_lon.u[:, 0]]) if ok else None
+        status = sol_lat.status if not sol_lat.success else sol_lon.status
+        cmd = self._conclude(u, status, xi0, u_ref[0])
+        self._record_timing(t0, t1, t2, t3, t3b, t4)
         return cmd
