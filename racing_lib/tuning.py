@@ -229,18 +229,30 @@ def evaluate_weights(
         The controller cannot be built (unknown name, a weight that is not a field of
         ``MPCSettings``, a negative weight).
     """
-    from racing_lib.experiment import make_car, make_controller, run_lap
+    from racing_lib.experiment import make_controller
 
     merged = {**(spec.weights or {}), **{k: float(v) for k, v in weights.items()}}
     lap_spec = dataclasses.replace(spec, weights=merged)
+    return _mean_objective(lap_spec, lambda: make_controller(lap_spec), seeds, w_t, w_s)
+
+
+def _mean_objective(
+    spec: Any, build_controller: Callable[[], Any], seeds: Any, w_t: float, w_s: float
+) -> float:
+    """Mean tuning objective over seeded laps of ``spec``, one new controller per lap.
+
+    A lap whose simulation raises a RacingLibError scores :data:`FAILED_EVALUATION`.
+    """
+    from racing_lib.experiment import make_car, run_lap
+
     length = float(spec.track.length)
     values = []
     for seed in _seed_tuple(seeds):
         # Built outside the try: a controller that cannot be built (unknown name, bad weight) is
         # a mistake to report, not a bad candidate.
-        car, ctrl = make_car(lap_spec), make_controller(lap_spec)
+        car, ctrl = make_car(spec), build_controller()
         try:
-            res = run_lap(car, ctrl, lap_spec.trajectory, track=lap_spec.track, seed=seed)
+            res = run_lap(car, ctrl, spec.trajectory, track=spec.track, seed=seed)
         except RacingLibError:
             values.append(FAILED_EVALUATION)
             continue
@@ -272,21 +284,12 @@ def evaluate_nominal_gains(
     ``lookahead_time``, ``kp``); the others keep their defaults. ``spec.controller`` is ignored.
     """
     from racing_lib.control.nominal import NominalController, NominalSettings
-    from racing_lib.experiment import make_car, run_lap
 
     _check_fields(gains, NominalSettings)
     settings = NominalSettings(**{k: float(v) for k, v in gains.items()})
-    length = float(spec.track.length)
-    values = []
-    for seed in _seed_tuple(seeds):
-        car, ctrl = make_car(spec), NominalController.from_trajectory(spec.trajectory, settings)
-        try:
-            res = run_lap(car, ctrl, spec.trajectory, track=spec.track, seed=seed)
-        except RacingLibError:
-            values.append(FAILED_EVALUATION)
-            continue
-        values.append(tuning_objective(res.log, res.metrics, w_t, w_s, track_length=length))
-    return float(np.mean(values))
+    return _mean_objective(
+        spec, lambda: NominalController.from_trajectory(spec.trajectory, settings), seeds, w_t, w_s
+    )
 
 
 # --------------------------------------------------------------------------------------------------
