@@ -201,13 +201,20 @@ def _as_float(name: str, value: Any) -> float:
     return out
 
 
+#: Share of the braking limit ``a_brk_max`` up to which braking stays linear in the pedal
+#: (:class:`PedalMap`); the simulated car's stops are linear to about 0.85 of the limit.
+BRAKE_KNEE = 0.8
+
+
 @dataclass(frozen=True)
 class PedalMap:
     """Empirical map between the pedal ``u_p`` in [-1, 1] and the tyre acceleration ``a_x``.
 
     Appendix C of the paper, with separate throttle and brake slopes:
 
-    ``a_x = m_0 + m_xi . xi + m_thr * max(u_p, 0) + m_brk * min(u_p, 0)``   (m/s^2)
+    ``a_x = m_0 + m_xi . xi + g_thr(v_x) * max(u_p, 0) + m_brk * min(u_p, 0)``   (m/s^2)
+
+    with the full-throttle gain ``g_thr(v_x) = min(m_thr, p_thr / v_x)``.
 
     The paper fits one linear map ``a_x = M [xi; u_p]``. Our simulated car has a nonlinear
     powertrain (torque curve, gears, power limit) and brakes that are far stronger than the engine:
@@ -216,8 +223,20 @@ class PedalMap:
     (``u_p < 0``), while the state part ``m_0 + m_xi . xi`` (what the car does with the pedal
     released: engine braking, speed dependence) is shared, which keeps the map continuous at
     ``u_p = 0`` and monotone, hence invertible. With ``m_thr == m_brk`` (see :meth:`from_linear`)
-    it is exactly the paper's single linear map. The defaults are placeholders of plausible size
-    for the default car; ``racing_lib.sysid`` fits the real coefficients.
+    it is exactly the paper's single linear map.
+
+    An engine delivers at most its power ``P``, so full throttle cannot add more than
+    ``P / (m v_x)`` at speed ``v_x``: a straight line in ``v_x`` overstates the throttle at the
+    top of the speed range by up to 2x (1.5 against 1.0 m/s^2 at 50 m/s on the default car), and a
+    planner that believes it plans straights the car cannot drive. ``p_thr`` (power per unit
+    mass, W/kg) caps the throttle gain by that hyperbola; ``None`` leaves the map linear, as in
+    the paper. Likewise the brakes can ask for more than the tyres give: ``a_brk_max`` is the
+    deceleration the tyres deliver at full brake in a straight line (the longitudinal tyre limit
+    of the paper's Appendix C). The brake part then stays ``m_brk u_p`` down to
+    ``BRAKE_KNEE a_brk_max`` and bends linearly from there to ``a_brk_max`` at ``u_p = -1``:
+    continuous, monotone and invertible, and close to an anti-lock system that gives less and
+    less extra deceleration per unit of pedal as it nears the grip. The defaults are placeholders of
+    plausible size for the default car; ``racing_lib.sysid`` fits the real coefficients.
 
     Attributes
     ----------
@@ -230,12 +249,20 @@ class PedalMap:
         Acceleration added by full throttle, m/s^2 (> 0).
     m_brk : float
         Deceleration added by full brake, m/s^2 (> 0).
+    p_thr : float or None
+        Largest throttle power per unit mass, W/kg (m^2/s^3): full throttle adds at most
+        ``p_thr / v_x``. None: no power limit (the paper's linear map).
+    a_brk_max : float or None
+        Tyre deceleration at full brake, m/s^2 (> 0), the tyres' limit (see above). None, or a
+        value of ``m_brk`` or more: braking is linear in the pedal to ``-m_brk``.
     """
 
     m_0: float = 1.0
     m_xi: tuple[float, ...] = (-0.06, 0.0, 0.0, 0.0, 0.0, 0.0)
     m_thr: float = 3.0
     m_brk: float = 9.0
+    p_thr: float | None = None
+    a_brk_max: float | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "m_0", _as_float("PedalMap.m_0", self.m_0))
@@ -255,6 +282,15 @@ class PedalMap:
                 raise ModelError(
                     f"PedalMap.{name} must be > 0 so that the pedal map is invertible; "
                     f"got {value}. Refit the map with data that contain both throttle and brake."
+                )
+            object.__setattr__(self, name, value)
+        for name, unit in (("p_thr", "W/kg"), ("a_brk_max", "m/s^2")):
+            if getattr(self, name) is None:
+                continue
+            value = _as_float(f"PedalMap.{name}", getattr(self, name))
+            if value <= 0.0:
+                raise ModelError(
+                    f"PedalMap.{name} must be > 0 {unit} (or None for no limit); got {value}."
                 )
             object.__setattr__(self, name, value)
 
@@ -285,7 +321,14 @@ class PedalMap:
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dictionary."""
-        return {"m_0": self.m_0, "m_xi": list(self.m_xi), "m_thr": self.m_thr, "m_brk": self.m_brk}
+        return {
+            "m_0": self.m_0,
+            "m_xi": list(self.m_xi),
+            "m_thr": self.m_thr,
+            "m_brk": self.m_brk,
+            "p_thr": self.p_thr,
+            "a_brk_max": self.a_brk_max,
+        }
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> PedalMap:
@@ -307,26 +350,72 @@ class PedalMap:
         out = self.m_0 + xi @ np.asarray(self.m_xi)
         return out
 
+    def throttle_gain(self, v_x: Any) -> Any:
+        """Acceleration added by full throttle at speed ``v_x`` (m/s), m/s^2:
+        ``min(m_thr, p_thr / v_x)`` (``m_thr`` without a power limit).
+
+        Works on floats, arrays and CasADi expressions. Below 1 m/s the speed is taken as 1 m/s
+        (the hyperbola has no meaning at standstill, where ``m_thr`` binds anyway).
+        """
+        if self.p_thr is None:
+            return self.m_thr
+        if isinstance(v_x, ca.SX | ca.MX | ca.DM):
+            return ca.fmin(self.m_thr, self.p_thr / ca.fmax(v_x, 1.0))
+        return np.minimum(self.m_thr, self.p_thr / np.maximum(np.asarray(v_x, dtype=float), 1.0))
+
+    def _brake_knee(self) -> tuple[float, float, float] | None:
+        """``(u_k, a_k, slope)``: the pedal and deceleration (m/s^2) where braking bends, and the
+        slope below it (m/s^2 per unit pedal); None when braking is linear to full brake."""
+        if self.a_brk_max is None or self.a_brk_max >= self.m_brk:
+            return None
+        a_k = BRAKE_KNEE * self.a_brk_max
+        u_k = -a_k / self.m_brk
+        return u_k, a_k, (self.a_brk_max - a_k) / (1.0 + u_k)
+
+    def _brake(self, u_p: Any) -> Any:
+        """Brake part of ``a_x`` (m/s^2, <= 0) for pedal(s) ``u_p``; numpy or CasADi."""
+        sym = isinstance(u_p, ca.SX | ca.MX | ca.DM)
+        fmin, fmax = (ca.fmin, ca.fmax) if sym else (np.minimum, np.maximum)
+        w = fmin(u_p, 0.0)
+        knee = self._brake_knee()
+        if knee is None:
+            return self.m_brk * w
+        u_k, _, slope = knee
+        return self.m_brk * fmax(w, u_k) + slope * fmin(w - u_k, 0.0)
+
+    def _speed(self, xi: Any) -> Any:
+        """``v_x`` of state(s) ``xi``: CasADi row ``1 x N`` or numpy ``(N,)``."""
+        if isinstance(xi, ca.SX | ca.MX | ca.DM):
+            return xi[int(X.VX), :]
+        return _state_rows(xi)[:, X.VX]
+
     def ax(self, xi: Any, u_p: Any) -> Any:
         """Tyre acceleration ``a_x`` (m/s^2) for state(s) ``xi`` and pedal ``u_p`` in [-1, 1].
 
         ``xi``: shape (6,) or (N, 6) (or a CasADi column / 6 x N matrix); ``u_p``: scalar or (N,).
         Returns a float, an array of shape (N,), or a CasADi expression.
         """
+        gain = self.throttle_gain(self._speed(xi))
         if isinstance(xi, ca.SX | ca.MX | ca.DM) or isinstance(u_p, ca.SX | ca.MX):
-            return self._base(xi) + self.m_thr * ca.fmax(u_p, 0) + self.m_brk * ca.fmin(u_p, 0)
+            return self._base(xi) + gain * ca.fmax(u_p, 0) + self._brake(u_p)
         scalar = np.ndim(xi) == 1 and np.ndim(u_p) == 0
         u_p = np.asarray(u_p, dtype=float)
-        out = self._base(xi) + self.m_thr * np.maximum(u_p, 0.0) + self.m_brk * np.minimum(u_p, 0.0)
+        out = self._base(xi) + gain * np.maximum(u_p, 0.0) + self._brake(u_p)
         return float(out[0]) if scalar else out
 
     def limits(self, xi: Any) -> tuple[Any, Any]:
         """``(a_min, a_max)`` in m/s^2: ``a_x`` at full brake (``u_p=-1``) and full throttle
         (``u_p=+1``) for state(s) ``xi`` of shape (6,) or (N, 6) (or CasADi columns)."""
         base = self._base(xi)
+        gain = self.throttle_gain(self._speed(xi))
         if not isinstance(base, ca.SX | ca.MX | ca.DM) and np.ndim(xi) == 1:
-            base = float(base[0])
-        return base - self.m_brk, base + self.m_thr
+            base, gain = float(base[0]), float(np.ravel(gain)[0])
+        return base - self.full_brake(), base + gain
+
+    def full_brake(self) -> float:
+        """Deceleration added by full brake, m/s^2: ``a_brk_max`` if the tyres limit it, else
+        ``m_brk``."""
+        return self.m_brk if self._brake_knee() is None else float(self.a_brk_max)
 
     def limits_at_speed(self, v_x: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         """``(a_min, a_max)`` in m/s^2 at speed(s) ``v_x`` (m/s) with every other state zero
@@ -344,7 +433,13 @@ class PedalMap:
         """
         scalar = np.ndim(xi) == 1 and np.ndim(a_x) == 0
         excess = np.asarray(a_x, dtype=float) - self._base(xi)
-        u_p = np.where(excess >= 0.0, excess / self.m_thr, excess / self.m_brk)
+        gain = self.throttle_gain(self._speed(xi))
+        u_brake = excess / self.m_brk
+        knee = self._brake_knee()
+        if knee is not None:
+            u_k, a_k, slope = knee
+            u_brake = np.where(excess >= -a_k, u_brake, u_k + (excess + a_k) / slope)
+        u_p = np.where(excess >= 0.0, excess / gain, u_brake)
         u_p = np.clip(u_p, -1.0, 1.0)
         return float(u_p[0]) if scalar else u_p
 
@@ -477,6 +572,14 @@ class ModelParams:
             math.tan(math.pi / (2.0 * self.C_f)) / self.B_f,
             math.tan(math.pi / (2.0 * self.C_r)) / self.B_r,
         )
+
+    def peak_acceleration(self) -> float:
+        """Largest acceleration the tyres can give in any direction, m/s^2: ``mu min(D_f, D_r) g``.
+
+        The radius of the friction ellipse (a circle here) that planning and control put around
+        ``(a_x, a_y)``: the model's lateral tyre forces know nothing of braking, the car's do.
+        """
+        return self.mu * min(self.D_f, self.D_r) * self.g
 
     def replace(self, **changes: Any) -> ModelParams:
         """A copy with some fields changed (validated)."""

@@ -182,6 +182,7 @@ def car_vector_field(
     q = p.stiffness_load_exponent
     min_share2 = p.min_lateral_share * p.min_lateral_share
     tcs_floor2 = 1.0 if p.tcs_floor >= 1.0 else p.tcs_floor * p.tcs_floor
+    abs_share2 = None if p.abs_share is None else p.abs_share * p.abs_share
     w_half = 0.5 * m * p.g / (p.l_f + p.l_r)
     fzs_f, fzs_r = w_half * p.l_r, w_half * p.l_f  # static wheel loads on flat ground, N
 
@@ -196,7 +197,13 @@ def car_vector_field(
         shape = sin(c * atan(b_eff * alpha))  # lateral use of the peak, pure slip
         # Traction control: drive force only up to what the lateral use leaves of the circle.
         f_drive_max = f_peak * ops.sqrt(fmax(1.0 - shape * shape, tcs_floor2))
-        fx = fmin(fmax(fx_cmd, -f_peak), fmin(f_peak, f_drive_max))
+        # ABS: brake force only up to what keeps part of the lateral grip, in the same way.
+        f_brake_max = (
+            f_peak
+            if abs_share2 is None
+            else f_peak * ops.sqrt(fmax(abs_share2 - shape * shape, tcs_floor2))
+        )
+        fx = fmin(fmax(fx_cmd, -f_brake_max), fmin(f_peak, f_drive_max))
         share = ops.sqrt(fmax(1.0 - fx * fx / (f_peak * f_peak + 1.0), min_share2))
         return fx, f_peak * shape * share
 

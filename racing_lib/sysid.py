@@ -130,6 +130,7 @@ MANOEUVRES: dict[str, str] = {
     "coast-down": "pedal 0 from high speed on a long, nearly straight road (C_xw, c_rr)",
     "circles": "steady-state constant-radius circles at rising speed (Pacejka B, C, D)",
     "steps": "steps of steering and pedal around a large circle (I_zz, steering lag, pedal map)",
+    "braking": "full brake from several speeds on a long, nearly straight road (braking limit)",
 }
 
 #: Relative tolerances the identification is tested against (``tests/test_sysid.py``), chosen from
@@ -344,6 +345,42 @@ def coast_down_log(
     )
 
 
+def braking_logs(
+    params: Any = None, speeds: Sequence[float] = (45.0, 35.0, 25.0), v_low: float = 8.0
+) -> list[DriveLog]:
+    """Straight-line stops: full throttle to each of ``speeds`` (m/s), then full brake to ``v_low``.
+
+    On the coast-down's 1.5 km circle, without actuation noise (a full stop is full brake). They
+    measure the deceleration the tyres give when the brakes ask for more than the grip, which the
+    brake slope of the pedal map, fitted on partial braking, cannot tell.
+    """
+    track = _proving_ground(1500.0, 30.0, "braking circle")
+    logs = []
+    for v_high in speeds:
+        car, obs0 = _car(track, _vehicle(params), start_speed=15.0, seed=None)
+        ctrl = _follower(track)
+        ctrl.reset(obs0)
+        phase = {"brake": False}
+
+        def policy(obs: Any, k: int, v_high=v_high, ctrl=ctrl, phase=phase) -> tuple[float, float]:
+            if obs.vx >= v_high:
+                phase["brake"] = True
+            return ctrl.step(obs).steer, (-1.0 if phase["brake"] else 1.0)
+
+        logs.append(
+            _record(
+                car,
+                obs0,
+                policy,
+                3000,
+                f"full stop {v_high:.0f}->{v_low:.0f} m/s",
+                "braking",
+                stop=lambda o, phase=phase: phase["brake"] and o.vx < v_low,
+            )
+        )
+    return logs
+
+
 def circle_logs(
     params: Any = None,
     seed: int = 0,
@@ -530,11 +567,13 @@ def collect_logs(seed: int = 0, params: Any = None, fast: bool | None = None) ->
         logs += circle_logs(params, seed, radii=(50.0, 120.0), levels=6, hold=4.0)
         logs += step_logs(params, seed, speeds=(18.0, 30.0), duration=30.0)
         logs += lap_logs(params, seed, tracks=("shortcut",), scalings=(0.8,), max_time=60.0)
+        logs += braking_logs(params, speeds=(45.0, 35.0))
     else:
         logs.append(coast_down_log(params, seed))
         logs += circle_logs(params, seed)
         logs += step_logs(params, seed)
         logs += lap_logs(params, seed)
+        logs += braking_logs(params)
     return logs
 
 
@@ -989,10 +1028,39 @@ def _fit_coast_down(
     return {"C_xw": float(coef[0]), "c_rr": float(coef[1]), "note": note}, stats
 
 
-def _pedal_regressor(S: _Samples) -> np.ndarray:
-    return np.column_stack(
-        [np.ones_like(S.vx), S.vx, np.maximum(S.pedal, 0.0), np.minimum(S.pedal, 0.0)]
-    )
+def _pedal_regressor(S: _Samples, v_corner: float | None) -> np.ndarray:
+    """Columns ``1, v_x, max(u_p, 0) min(1, v_corner / v_x), min(u_p, 0)``.
+
+    For a fixed corner speed ``v_corner`` (where the power hyperbola meets the torque-limited
+    gain ``m_thr``) the map is linear in its coefficients; None: no power limit.
+    """
+    throttle = np.maximum(S.pedal, 0.0)
+    if v_corner is not None:
+        throttle = throttle * np.minimum(1.0, v_corner / np.maximum(S.vx, 1.0))
+    return np.column_stack([np.ones_like(S.vx), S.vx, throttle, np.minimum(S.pedal, 0.0)])
+
+
+def _best_corner_speed(S: _Samples, y: np.ndarray) -> float | None:
+    """The corner speed ``p_thr / m_thr`` (m/s) that fits ``y`` best, or None for no power limit.
+
+    A one-dimensional search (the rest is linear least squares): a grid, then a bounded refinement.
+    None when the best corner lies above the data's speeds, i.e. the engine never ran out of power.
+    """
+    from scipy.optimize import minimize_scalar
+
+    def sse(v_corner: float) -> float:
+        A = _pedal_regressor(S, v_corner)
+        coef, *_ = np.linalg.lstsq(A, y, rcond=None)
+        return float(np.sum((y - A @ coef) ** 2))
+
+    v_top = float(np.percentile(S.vx[S.pedal > 0.2], 95))
+    grid = np.geomspace(3.0, max(v_top, 4.0), 40)
+    costs = [sse(v) for v in grid]
+    k = int(np.argmin(costs))
+    if k == grid.size - 1:
+        return None
+    lo, hi = grid[max(k - 1, 0)], grid[min(k + 1, grid.size - 1)]
+    return float(minimize_scalar(sse, bounds=(lo, hi), method="bounded").x)
 
 
 def _tyre_ax(kp: ModelParams, S: _Samples, fyf_sin: np.ndarray) -> np.ndarray:
@@ -1005,7 +1073,9 @@ def _fit_pedal(
     kp: ModelParams, S: _Samples, fyf_sin: np.ndarray
 ) -> tuple[PedalMap, dict[str, FitStats]]:
     """Step 4: the pedal map by linear least squares, with a held-out R^2."""
-    use = S.valid & (S.vx > 3.0)
+    # Stops at full brake are saturated by the tyres, not by the brakes: they are for the
+    # braking limit (_fit_brake_limit), not for the slope.
+    use = S.valid & (S.vx > 3.0) & (S.kind != "braking")
     thr = np.count_nonzero(use & (S.pedal > 0.2))
     brk = np.count_nonzero(use & (S.pedal < -0.2))
     if thr < 20 or brk < 20:
@@ -1018,8 +1088,9 @@ def _fit_pedal(
     idx = np.flatnonzero(use)
     Su = _subset(S, idx)
     y = _tyre_ax(kp, Su, fyf_sin[idx])
-    A = _pedal_regressor(Su)
-    names = ["1", "v_x", "max(u_p, 0)", "min(u_p, 0)"]
+    v_corner = _best_corner_speed(Su, y)
+    A = _pedal_regressor(Su, v_corner)
+    names = ["1", "v_x", "max(u_p, 0) (power-limited)", "min(u_p, 0)"]
     cond = _check_regressor(A, names, "the pedal map", "steps")
     # Hold out every fifth block of 50 periods (5 s) to judge the map on data it was not fit to.
     test = (np.arange(idx.size) // 50) % 5 == 4
@@ -1036,7 +1107,8 @@ def _fit_pedal(
         )
     m_xi = np.zeros(len(X))
     m_xi[X.VX] = coef[1]  # only the speed drives the powertrain; other states would fit noise
-    pedal = PedalMap(m_0=coef[0], m_xi=tuple(m_xi), m_thr=coef[2], m_brk=coef[3])
+    p_thr = None if v_corner is None else float(coef[2] * v_corner)
+    pedal = PedalMap(m_0=coef[0], m_xi=tuple(m_xi), m_thr=coef[2], m_brk=coef[3], p_thr=p_thr)
     stats = {
         "pedal map": FitStats("pedal map", idx.size, _rms(e), "m/s^2", _r2(y, e), cond),
         "pedal map (held out)": FitStats(
@@ -1049,6 +1121,27 @@ def _fit_pedal(
         ),
     }
     return pedal, stats
+
+
+def _fit_brake_limit(kp: ModelParams, S: _Samples, fyf_sin: np.ndarray) -> tuple[float | None, str]:
+    """Step 4b: the tyres' deceleration limit (m/s^2) from the full stops, or None without them.
+
+    The median tyre deceleration over the full-brake samples above 10 m/s (below, the brakes
+    fade out towards standstill).
+    """
+    idx = np.flatnonzero(S.valid & (S.kind == "braking") & (S.pedal <= -0.999) & (S.vx > 10.0))
+    if idx.size < _MIN_SAMPLES:
+        return None, (
+            f"no braking limit: {idx.size} full-brake samples above 10 m/s (need >= "
+            f"{_MIN_SAMPLES}); add the 'braking' manoeuvre to bound a_min by the tyres"
+        )
+    decel = -_tyre_ax(kp, _subset(S, idx), fyf_sin[idx])
+    limit = float(np.median(decel))
+    spread = float(np.percentile(decel, 90) - np.percentile(decel, 10))
+    return limit, (
+        f"braking limit {limit:.2f} m/s^2 from {idx.size} full-brake samples "
+        f"(10-90 % spread {spread:.2f} m/s^2)"
+    )
 
 
 def pedal_map_r2(params: ModelParams, logs: Sequence[DriveLog], steer_tau: float = 0.0) -> float:
@@ -1246,6 +1339,9 @@ def identify(
     fitted = kp.replace(**{k: v for k, v in tyres.items() if k != "steer_tau"}, **resist)
     pedal, f3 = _fit_pedal(fitted, S, fyf_sin)
     fits |= f3
+    a_brk_max, brake_note = _fit_brake_limit(fitted, S, fyf_sin)
+    notes.append(brake_note)
+    pedal = dataclasses.replace(pedal, a_brk_max=a_brk_max)
     fitted = fitted.replace(pedal=pedal)
 
     tp, tau_true = _truth_params(truth)
@@ -1269,6 +1365,8 @@ def identify(
         ("pedal m_vx", "1/s", "laps+steps"),
         ("pedal m_thr", "m/s^2", "laps+steps"),
         ("pedal m_brk", "m/s^2", "laps+steps"),
+        ("pedal p_thr", "W/kg", "laps+steps"),
+        ("pedal a_brk_max", "m/s^2", "braking"),
     ]
     fd = _derived(fitted)
     td = _derived(tp) if tp is not None else {}
@@ -1277,12 +1375,15 @@ def identify(
         "pedal m_vx": pedal.m_xi[X.VX],
         "pedal m_thr": pedal.m_thr,
         "pedal m_brk": pedal.m_brk,
+        "pedal p_thr": pedal.p_thr if pedal.p_thr is not None else float("nan"),
+        "pedal a_brk_max": pedal.a_brk_max if pedal.a_brk_max is not None else float("nan"),
     }
     fit_of = {
         "coast-down": f"RMS {fits['coast-down'].rms:.3g} m/s^2",
         "circles+steps": f"RMS lat {lat.rms:.3g} m/s^2",
         "steps": f"RMS yaw {yaw.rms:.3g} rad/s^2",
         "laps+steps": f"held-out R^2 {fits['pedal map (held out)'].r2:.3f}",
+        "braking": "median of the full stops",
     }
     rows = []
     for name, unit, man in spec:
@@ -1290,6 +1391,14 @@ def identify(
             val, true = fd[name], td.get(name)
         elif name == "steer_tau":
             val, true = tyres["steer_tau"], tau_true
+        elif name == "pedal p_thr":
+            # The one pedal-map number with a true value: engine power at the wheels per kg.
+            val = pedal_vals[name]
+            true = (
+                truth.power_max * truth.driveline_efficiency / truth.m
+                if hasattr(truth, "power_max")
+                else None
+            )
         elif name in pedal_vals:
             val, true = pedal_vals[name], None  # the powertrain is nonlinear: no true map
         else:

@@ -996,6 +996,34 @@ def _read_tuned_file() -> dict[str, Any]:
     return data.get("configs", {}) if isinstance(data, dict) else {}
 
 
+def _history_summary(history: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
+    """Per generation: best objective so far, the generation's median, step size, elapsed time."""
+    return [
+        {
+            "generation": int(h["generation"]),
+            "best_objective": float(h["best_objective"]),
+            "median_objective": float(np.median(h["objectives"])),
+            "sigma": float(h["sigma"]),
+            "elapsed_s": float(h["elapsed"]),
+        }
+        for h in history
+    ]
+
+
+def tuning_history(config: str = "main") -> list[dict[str, float]]:
+    """The convergence history of the shipped tuning run of ``config``.
+
+    Returns
+    -------
+    list of dict
+        One entry per CMA-ES generation with ``generation``, ``best_objective`` (best so far),
+        ``median_objective`` (of that generation's candidates), ``sigma`` (step size, log10
+        units) and ``elapsed_s`` (s); empty when no history is shipped for ``config``.
+    """
+    entry = _read_tuned_file().get(config) or {}
+    return [dict(h) for h in entry.get("history", [])]
+
+
 def tuned_configurations() -> list[str]:
     """Names of the configurations with tuned weights shipped in ``racing_lib/data``."""
     return sorted(_read_tuned_file())
@@ -1148,6 +1176,7 @@ def generate_tuned_weights(
                 "seeds": list(_seed_tuple(seeds)),
                 "generations": res.generations,
                 "evaluations": res.evaluations,
+                "history": _history_summary(res.history),
                 "settings": dataclasses.asdict(settings or TuningSettings.default()),
                 "created_utc": time.strftime("%Y-%m-%dT%H:%MZ", time.gmtime()),
             }
@@ -1178,5 +1207,6 @@ __all__ = [
     "tune_weights",
     "tuned_configurations",
     "tuned_weights",
+    "tuning_history",
     "tuning_objective",
 ]

@@ -104,6 +104,12 @@ class VehicleParams:
         Traction control: a driven wheel's drive force is capped at f_peak sqrt(1 - s_y^2), s_y the
         wheel's lateral use of its peak, but never below tcs_floor f_peak, -. 1.0 switches traction
         control off. Without it full throttle out of a hairpin spins this rear-driven car.
+    abs_share : float or None
+        Anti-lock brakes: a wheel's brake force is capped at f_peak sqrt(abs_share^2 - s_y^2)
+        (never below tcs_floor f_peak), so a braking wheel keeps at least sqrt(1 - abs_share^2)
+        of its lateral grip, -. Gran Turismo's cars brake with ABS by default. None: no ABS (a
+        wheel brakes up to its peak and keeps only min_lateral_share); then a hard stop on a
+        gentle curve locks the lightly loaded rear and spins the car.
     c_rr : float
         Rolling resistance coefficient, - (R_x = c_rr F_z; road tires 0.010-0.015).
     r_w : float
@@ -191,6 +197,7 @@ class VehicleParams:
     stiffness_load_exponent: float = 0.5
     min_lateral_share: float = 0.1
     tcs_floor: float = 0.2
+    abs_share: float | None = 0.9
     c_rr: float = 0.012
     r_w: float = 0.30
     # --- powertrain (rear-wheel drive) ---

@@ -429,6 +429,40 @@ def test_pedal_map_round_trip_limits_and_continuity() -> None:
         assert got == pytest.approx([pm.ax(xi[i], u_p[i]), *pm.limits(xi[i])], rel=1e-13)
 
 
+def test_pedal_map_power_and_braking_limits() -> None:
+    """The throttle gain follows min(m_thr, p_thr / v_x); braking stops at -a_brk_max."""
+    rng = np.random.default_rng(11)
+    pm = PedalMap(m_0=0.0, m_xi=(0.0,) * NX, m_thr=4.0, m_brk=12.0, p_thr=50.0, a_brk_max=10.0)
+    xi, _, _, _ = random_points(rng, 200)
+    xi[:, X.VX] = rng.uniform(2.0, 60.0, 200)
+    v = xi[:, X.VX]
+    gain = np.minimum(4.0, 50.0 / v)  # independent: the hyperbola meets m_thr at 12.5 m/s
+    np.testing.assert_allclose(pm.ax(xi, np.ones(200)), gain)
+    np.testing.assert_allclose(pm.ax(xi, 0.5 * np.ones(200)), 0.5 * gain)
+    lo, hi = pm.limits(xi)
+    np.testing.assert_allclose(hi, gain)
+    np.testing.assert_allclose(lo, -10.0)  # the tyres, not the brakes (-12), bound braking
+    # braking is linear (12 per unit pedal) down to 0.8 of the limit, then bends to it
+    assert pm.ax(xi[0], -0.5) == pytest.approx(-6.0)
+    assert pm.ax(xi[0], -8.0 / 12.0) == pytest.approx(-8.0)
+    assert pm.ax(xi[0], -1.0) == pytest.approx(-10.0)
+    brake = pm.ax(np.repeat(xi[:1], 101, axis=0), np.linspace(-1.0, 0.0, 101))
+    assert np.all(np.diff(brake) > 0.0)  # monotone, hence invertible
+    u_p = rng.uniform(-1.0, 1.0, 200)
+    np.testing.assert_allclose(pm.pedal(pm.ax(xi, u_p), xi), u_p, atol=1e-12)
+    # symbolic (planner) and numeric agree, limits included
+    xs, us = ca.SX.sym("xi", NX), ca.SX.sym("u_p")
+    f = ca.Function("ax", [xs, us], [pm.ax(xs, us), *pm.limits(xs)])
+    for i in range(5):
+        got = [float(val) for val in f(xi[i], u_p[i])]
+        assert got == pytest.approx([pm.ax(xi[i], u_p[i]), *pm.limits(xi[i])], rel=1e-13)
+    assert PedalMap.from_dict(pm.to_dict()) == pm
+    with pytest.raises(ModelError, match="p_thr must be > 0"):
+        PedalMap(p_thr=-1.0)
+    with pytest.raises(ModelError, match="a_brk_max must be > 0"):
+        PedalMap(a_brk_max=0.0)
+
+
 def test_pedal_map_single_slope_is_the_paper_map_and_coefficients_round_trip() -> None:
     M = np.array([-0.04, 0.0, 0.0, 0.0, 0.0, 0.0, 5.0])
     pm = PedalMap.from_linear(M)

@@ -78,6 +78,18 @@ def test_pedal_map_predicts_held_out_acceleration(result, logs):
     assert pedal_map_r2(result.params, fresh, result.steer_tau) > 0.9
 
 
+def test_power_limit_and_braking_limit_are_identified(result):
+    truth = VehicleParams()
+    pedal = result.params.pedal
+    # Engine power at the wheels per kg; gear shifts cost a few percent of it.
+    p_true = truth.power_max * truth.driveline_efficiency / truth.m
+    assert pedal.p_thr == pytest.approx(p_true, rel=0.10)
+    # The tyres, not the brakes, end a full stop: below the brakes' reach, near the 1 g the
+    # car's straight-line stop gives (mu = 1.25, load sensitivity and brake balance cost some).
+    assert pedal.a_brk_max < pedal.m_brk
+    assert 0.9 * truth.g < pedal.a_brk_max < truth.mu * truth.g
+
+
 def test_report_lists_fitted_and_true_values(result):
     text = result.report()
     for word in ("C_xw", "c_rr", "I_zz", "mu*D_f", "C_alpha_r", "pedal m_thr", "true", "R^2"):

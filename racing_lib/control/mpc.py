@@ -541,6 +541,7 @@ class _MPCBase:
                 pedal_map,
                 m_thr=pedal_map.m_thr * st.throttle_scale,
                 m_brk=pedal_map.m_brk * st.brake_scale,
+                p_thr=None if pedal_map.p_thr is None else pedal_map.p_thr * st.throttle_scale,
             )
         self.pedal_map = pedal_map
         if not isinstance(self.params, ModelParams):
@@ -699,7 +700,7 @@ class _MPCBase:
         a_min = np.maximum(a_min, st.ax_min_floor)
         if st.friction_ellipse:
             p = self.params
-            a_tot = st.friction_scale * p.mu * min(p.D_f, p.D_r) * p.g
+            a_tot = st.friction_scale * p.peak_acceleration()
             a_y = xi[:, X.VX] * xi[:, X.R]
             # Keep a tenth of the total for a_x even when the lateral demand exceeds the limit.
             room = np.sqrt(np.maximum(a_tot**2 - a_y**2, (0.1 * a_tot) ** 2))

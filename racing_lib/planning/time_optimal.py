@@ -23,15 +23,18 @@ Formulation choices, from the measurements in MEASURED.md:
   dynamics defect by the scale of its state; the objective by a reference lap time.
 * **Exact Hessian** (CasADi's algorithmic differentiation of an SX graph).
 * **Combined slip**: the tire acceleration a_x and the lateral acceleration a_y share the friction
-  ellipse ``(a_x / (mu g))^2 + (a_y / (mu g))^2 <= 1`` (``friction_ellipse``); the model's lateral
-  tire forces do not know about braking, the simulated car's tires do.
+  ellipse ``a_x^2 + a_y^2 <= a_peak^2`` (``friction_ellipse``; ``a_peak`` is the tyres' peak,
+  :meth:`racing_lib.model.ModelParams.peak_acceleration`); the model's lateral tire forces do not
+  know about braking, the simulated car's tires do.
 * **State-dependent a_x limits** (paper, Appendix C): a_x between the pedal map's value at full
-  brake and at full throttle. Our pedal map is affine in the state, so by default
-  (``pedal_limits="exact"``) they are imposed exactly as linear constraints ``-m_brk <= a_x - (m_0
-  + m_xi . xi) <= m_thr`` and one solve suffices. ``"iterate"`` is the paper's scheme, for maps
-  that are not affine: bounds evaluated on the last solution, re-solved until they settle (at most
-  ``max_outer`` solves). On Norisring (574 nodes) "exact" took 25 IPOPT iterations; "iterate" took
-  3-4 solves of 40-75 iterations each, because every re-solve restarts IPOPT's barrier.
+  brake and at full throttle. Our pedal map is affine in the state apart from its power limit, so
+  by default (``pedal_limits="exact"``) they are imposed exactly as constraints ``-a_brake <=
+  a_x - (m_0 + m_xi . xi) <= m_thr`` (``a_brake``: full brake, the tyres' limit) and, with a
+  power limit, ``(a_x - m_0 - m_xi . xi) v_x <= p_thr``; one solve suffices. ``"iterate"``
+  is the paper's scheme, for maps that are not affine: bounds evaluated on the last solution,
+  re-solved until they settle (at most ``max_outer`` solves). On Norisring (574 nodes) "exact"
+  took 25 IPOPT iterations; "iterate" took 3-4 solves of 40-75 iterations each, because every
+  re-solve restarts IPOPT's barrier.
 
 The CasADi problem is built once per (track grid, parameters, options, settings) and kept in a small
 cache; building costs seconds, more than a warm solve.
@@ -198,7 +201,6 @@ class _Problem:
         self.grid = grid
         self.params = params
         self.settings = st
-        g = float(params.g)
         rows = {name: i for i, name in enumerate(_VARS)}
 
         # One node, in SX: dynamics dxi/ds, path constraints and 1/s_dot (the lap-time integrand).
@@ -223,7 +225,7 @@ class _Problem:
             lb_path += [-1.0, -1.0]
             ub_path += [1.0, 1.0]
         if st.friction_ellipse:
-            grip = params.mu * g
+            grip = params.peak_acceleration()
             path.append((z[rows["AX"]] / grip) ** 2 + (terms["a_y"] / grip) ** 2)
             lb_path.append(-np.inf)
             ub_path.append(1.0)
@@ -231,8 +233,13 @@ class _Problem:
             pedal = params.pedal
             base = pedal.m_0 + ca.dot(ca.DM(pedal.m_xi), xi)
             path.append((z[rows["AX"]] - base) / 5.0)
-            lb_path.append(-pedal.m_brk / 5.0)
+            lb_path.append(-pedal.full_brake() / 5.0)
             ub_path.append(pedal.m_thr / 5.0)
+            if pedal.p_thr is not None:
+                # The power limit as a smooth product (throttle power per unit mass), not a min().
+                path.append((z[rows["AX"]] - base) * xi[int(X.VX)] / pedal.p_thr)
+                lb_path.append(-np.inf)
+                ub_path.append(1.0)
         elif st.pedal_limits != "iterate":
             raise PlanningError(
                 f"unknown pedal_limits {st.pedal_limits!r}; use 'iterate' or 'exact'."
@@ -464,7 +471,7 @@ def solve_time_optimal(
     prob, build_time = _problem(grid, track, params, options, st)
     pedal = params.pedal
     rows = {name: i for i, name in enumerate(_VARS)}
-    grip = params.mu * params.g
+    grip = params.peak_acceleration()
 
     def ax_limits(z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         if st.pedal_limits == "exact":
