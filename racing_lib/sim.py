@@ -27,6 +27,7 @@ Taught in notebook 02 (the simulated car and its logs).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from enum import IntEnum
 from typing import Any, Protocol, runtime_checkable
@@ -51,6 +52,7 @@ __all__ = [
     "SimState",
     "SimulatedCar",
     "car_vector_field",
+    "tyre_limits",
 ]
 
 _TWO_PI = 2.0 * math.pi
@@ -115,6 +117,53 @@ N_STATE = len(SimState)
 _PSI, _VX, _VY, _R, _DELTA = (int(SimState[n]) for n in ("PSI", "VX", "VY", "R", "DELTA"))
 
 
+def tyre_limits(
+    p: VehicleParams,
+    fz: Any,
+    fz_static: float,
+    mu: Any,
+    b: float,
+    c: float,
+    d: float,
+    alpha: Any,
+    ops: Any,
+    floor_max: Callable[[Any, float], Any] | None = None,
+) -> tuple[Any, Any, Any, Any]:
+    """Force limits of one wheel: the simulated car's tyre law (floats, arrays or CasADi).
+
+    Parameters
+    ----------
+    p : VehicleParams
+        The car.
+    fz : load on the wheel, N; fz_static : its static value on flat ground, N.
+    mu : friction coefficient under the wheel, -; b, c, d : its axle's Pacejka B (1/rad), C, D.
+    alpha : slip angle, rad.
+    ops : the backend's math (``racing_lib.vehicle.ops_for``).
+    floor_max : callable, optional
+        ``max(a, floor^2)`` used for the traction control and ABS floors (default ``ops.fmax``);
+        planners pass a rounded one, since a kink in a constraint makes IPOPT cycle.
+
+    Returns
+    -------
+    f_peak : peak force with load sensitivity, N.
+    shape : lateral use of the peak in pure slip, ``sin(C atan(B_eff alpha))``, -; the stiffness
+        grows less than the load (``B_eff = B (fz_static / fz)^q``).
+    f_drive_max : traction control, drive force up to what the lateral use leaves of the circle, N.
+    f_brake_max : ABS, brake force up to what keeps part of the lateral grip, N.
+    """
+    floor_max = floor_max or ops.fmax
+    f_peak = mu * fz * d * (1.0 - p.load_sensitivity * (fz - p.F_z0) / p.F_z0)
+    b_eff = b * (fz_static / ops.fmax(fz, 1.0)) ** p.stiffness_load_exponent
+    shape = ops.sin(c * ops.atan(b_eff * alpha))
+    floor2 = 1.0 if p.tcs_floor >= 1.0 else p.tcs_floor * p.tcs_floor
+    f_drive_max = f_peak * ops.sqrt(floor_max(1.0 - shape * shape, floor2))
+    if p.abs_share is None:
+        f_brake_max = f_peak
+    else:
+        f_brake_max = f_peak * ops.sqrt(floor_max(p.abs_share**2 - shape * shape, floor2))
+    return f_peak, shape, f_drive_max, f_brake_max
+
+
 def car_vector_field(
     state: Any,
     delta_cmd: Any,
@@ -177,31 +226,17 @@ def car_vector_field(
     fb_r = -0.5 * (1.0 - p.brake_front_share) * f_brake * sgn  # per rear wheel, N
     fx_r_cmd = 0.5 * f_drive + fb_r  # rear-wheel drive, equal split (ideal differential)
 
-    fz0 = p.F_z0
-    k_load = p.load_sensitivity
-    q = p.stiffness_load_exponent
     min_share2 = p.min_lateral_share * p.min_lateral_share
-    tcs_floor2 = 1.0 if p.tcs_floor >= 1.0 else p.tcs_floor * p.tcs_floor
-    abs_share2 = None if p.abs_share is None else p.abs_share * p.abs_share
     w_half = 0.5 * m * p.g / (p.l_f + p.l_r)
     fzs_f, fzs_r = w_half * p.l_r, w_half * p.l_f  # static wheel loads on flat ground, N
 
     def wheel(
         fz: Any, fz_static: float, mu: Any, b: float, c: float, d: float, alpha: Any, fx_cmd: Any
     ) -> tuple[Any, Any]:
-        # Peak force with load sensitivity; stiffness B grows less than the load (exponent q, B
-        # is the value at the static load); then the friction ellipse: the longitudinal force is
-        # limited by the peak and the lateral force gets what is left of the ellipse.
-        f_peak = mu * fz * d * (1.0 - k_load * (fz - fz0) / fz0)
-        b_eff = b * (fz_static / fmax(fz, 1.0)) ** q
-        shape = sin(c * atan(b_eff * alpha))  # lateral use of the peak, pure slip
-        # Traction control: drive force only up to what the lateral use leaves of the circle.
-        f_drive_max = f_peak * ops.sqrt(fmax(1.0 - shape * shape, tcs_floor2))
-        # ABS: brake force only up to what keeps part of the lateral grip, in the same way.
-        f_brake_max = (
-            f_peak
-            if abs_share2 is None
-            else f_peak * ops.sqrt(fmax(abs_share2 - shape * shape, tcs_floor2))
+        # The longitudinal force is limited by the peak, traction control and ABS; the lateral
+        # force gets what is left of the friction ellipse.
+        f_peak, shape, f_drive_max, f_brake_max = tyre_limits(
+            p, fz, fz_static, mu, b, c, d, alpha, ops
         )
         fx = fmin(fmax(fx_cmd, -f_brake_max), fmin(f_peak, f_drive_max))
         share = ops.sqrt(fmax(1.0 - fx * fx / (f_peak * f_peak + 1.0), min_share2))

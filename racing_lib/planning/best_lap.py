@@ -58,6 +58,7 @@ from racing_lib.planning.time_optimal import (
     solve_time_optimal,
 )
 from racing_lib.planning.trajectory import Trajectory
+from racing_lib.sim import tyre_limits
 from racing_lib.vehicle import VehicleParams
 
 __all__ = [
@@ -91,24 +92,21 @@ _SCALE = np.array([30.0, 1.0, 0.5, 0.1, 0.2, 5.0, 0.1, 5000.0, 10000.0, 5.0, 10.
 
 
 def _wheel_limits(p: VehicleParams, fz: Any, front: bool, alpha: Any, ops: Any) -> tuple[Any, Any]:
-    """Peak force and traction-control drive limit of one wheel, N (the sim's tire law).
-
-    Duplicates the force limits inside `racing_lib.sim.car_vector_field` (its inner ``wheel``);
-    to be replaced by a function exported from the simulator.
-    """
+    """Brake (ABS) and drive (traction control) limits of one wheel, N: the sim's tyre law
+    (:func:`racing_lib.sim.tyre_limits`) with its floors' kinks rounded off (width 0.01), since a
+    kink in a constraint at the optimum makes IPOPT cycle."""
     b, c, d = (p.B_f, p.C_f, p.D_f) if front else (p.B_r, p.C_r, p.D_r)
     w_half = 0.5 * p.m * p.g / (p.l_f + p.l_r)
     fz_static = w_half * (p.l_r if front else p.l_f)
-    f_peak = p.mu * fz * d * (1.0 - p.load_sensitivity * (fz - p.F_z0) / p.F_z0)
-    b_eff = b * (fz_static / ops.fmax(fz, 1.0)) ** p.stiffness_load_exponent
-    shape = ops.sin(c * ops.atan(b_eff * alpha))
-    floor2 = 1.0 if p.tcs_floor >= 1.0 else p.tcs_floor * p.tcs_floor
-    # The sim's max(1 - shape^2, floor^2) with its kink rounded off (width 0.01): a kink in a
-    # constraint at the optimum makes IPOPT cycle.
-    a = 1.0 - shape * shape
-    eps = 1e-2
-    soft = 0.5 * (a + floor2 + ops.sqrt((a - floor2) ** 2 + eps * eps))
-    return f_peak, f_peak * ops.sqrt(soft)
+
+    def soft_max(a: Any, floor2: float) -> Any:
+        eps = 1e-2
+        return 0.5 * (a + floor2 + ops.sqrt((a - floor2) ** 2 + eps * eps))
+
+    _, _, f_drive_max, f_brake_max = tyre_limits(
+        p, fz, fz_static, p.mu, b, c, d, alpha, ops, floor_max=soft_max
+    )
+    return f_brake_max, f_drive_max
 
 
 def _smooth_ops(rel: float) -> Any:
