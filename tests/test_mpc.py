@@ -278,12 +278,17 @@ def test_heuristic_trajectory_and_reference(circle_setup):
     assert xi0[X.EY] == pytest.approx(1.0, abs=1e-6)
     assert xi0[X.S] == pytest.approx(s0, abs=1e-4)
     assert xi0[X.EPSI] == pytest.approx(0.0, abs=1e-6)
-    lam = mpc._lam_used
+    lam = mpc.blend_weights
     np.testing.assert_allclose(lam, 1.0 - np.arange(N + 1) / N)
+    xi_hat = mpc.heuristic_trajectory(xi0, xi_ref)
+    np.testing.assert_allclose(xi_hat[0], xi0)  # starts at the car
+    np.testing.assert_allclose(xi_hat[-1], xi_ref[-1])  # ends on the plan
+    assert xi_hat[N // 2, X.EY] == pytest.approx(0.5 * xi0[X.EY])  # halfway, half the offset
     off = CoupledMPC(
         plan, params=params, settings=MPCSettings(horizon=N, smooth_transition=False, jit=False)
     )
-    assert np.all(off._lam_used == 0.0)
+    assert np.all(off.blend_weights == 0.0)
+    np.testing.assert_allclose(off.heuristic_trajectory(xi0, xi_ref), xi_ref)
 
 
 # --------------------------------------------------------------------------------------------------

@@ -851,6 +851,30 @@ class CoupledMPC(_MPCBase):
         self._lam_used = self._lam if st.smooth_transition else np.zeros_like(self._lam)
         self._shift_buffer = []
 
+    @property
+    def blend_weights(self) -> np.ndarray:
+        """``lambda_k``, k = 0..N, of the heuristic trajectory: 1 falling linearly to 0 (all 0
+        without the smooth transition), shape (N+1,)."""
+        return self._lam_used.copy()
+
+    def heuristic_trajectory(self, xi0: np.ndarray, xi_ref: np.ndarray) -> np.ndarray:
+        """The states the model is linearized at: ``xi_hat_k = xi_ref_k + lambda_k (xi0 -
+        xi_ref_0)`` (the paper's heuristic trajectory).
+
+        Parameters
+        ----------
+        xi0 : ndarray (6,)
+            The car's state (order of :class:`racing_lib.model.X`).
+        xi_ref : ndarray (N+1, 6)
+            The plan at stages 0..N (:meth:`reference`).
+
+        Returns
+        -------
+        ndarray (N+1, 6)
+            From the measured state at stage 0 to the plan at stage N.
+        """
+        return xi_ref + self._lam_used[:, None] * (xi0 - xi_ref[0])[None, :]
+
     def step(self, obs: Any) -> Command:
         """One control period: project, build the QP along the heuristic trajectory, solve."""
         st = self.settings
@@ -859,9 +883,7 @@ class CoupledMPC(_MPCBase):
         xi0 = self.current_state(obs)
         t1 = time.perf_counter()
         xi_ref, u_ref, rows = self.reference(xi0[X.S])
-        # Heuristic trajectory (paper Eq.): from the measured state to the reference over N stages.
-        delta0 = xi0 - xi_ref[0]
-        xi_hat = xi_ref + self._lam_used[:, None] * delta0[None, :]
+        xi_hat = self.heuristic_trajectory(xi0, xi_ref)
         # The same transition for the inputs, from the last command to the plan's: linearizing
         # at the plan's steering while the front tires are working at a very different angle
         # gets the sign of the tire-force slope wrong when the car is near the grip limit.

@@ -45,8 +45,7 @@ def _mpc():
 
 def _library_heuristic(mpc, xi0: np.ndarray, xi_ref: np.ndarray) -> np.ndarray:
     """The heuristic trajectory exactly as CoupledMPC.step builds it."""
-    lam = mpc._lam  # the controller's blending weights lambda_k, k = 0..N
-    return xi_ref + lam[:, None] * (xi0 - xi_ref[0])[None, :]
+    return mpc.heuristic_trajectory(xi0, xi_ref)
 
 
 def check_heuristic_trajectory(heuristic_trajectory) -> CheckResult:
