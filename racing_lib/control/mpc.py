@@ -138,11 +138,13 @@ class MPCSettings:
         simulated car, full brake at 40-50 m/s gave about 10.4 m/s^2 where the identified map
         says 12.2, and a controller that believes the map brakes too late.
     friction_ellipse : bool
-        Bound a_x also by the friction left over from cornering,
-        ``|a_x| <= sqrt((friction_scale mu D g)^2 - a_y^2)`` with ``a_y = v_x r`` of the heuristic
-        trajectory (``D`` the smaller Pacejka peak factor). The model's tires do not know that
-        braking costs lateral grip; the car's do, and a controller that brakes fully into a
-        hairpin (as the plan may ask when the car arrives too fast) understeers into the wall.
+        Bound a_x also by the friction left over from cornering, the planner's g-g ellipse:
+        ``|a_x| <= a_brake sqrt(1 - (a_y / a_peak)^2)`` with ``a_y = v_x r`` of the heuristic
+        trajectory, ``a_peak = friction_scale mu D g`` (``D`` the smaller Pacejka peak factor)
+        and ``a_brake`` the pedal map's full brake (scaled alike, at most ``a_peak``). The
+        model's tires do not know that braking costs lateral grip; the car's do, and a
+        controller that brakes fully into a hairpin (as the plan may ask when the car arrives
+        too fast) understeers into the wall.
         This is the planner's friction ellipse, made a state-dependent input bound like the
         paper's pedal limits.
     friction_scale : float
@@ -701,9 +703,11 @@ class _MPCBase:
         if st.friction_ellipse:
             p = self.params
             a_tot = st.friction_scale * p.peak_acceleration()
+            a_long = min(a_tot, st.friction_scale * self.pedal_map.full_brake())
             a_y = xi[:, X.VX] * xi[:, X.R]
-            # Keep a tenth of the total for a_x even when the lateral demand exceeds the limit.
-            room = np.sqrt(np.maximum(a_tot**2 - a_y**2, (0.1 * a_tot) ** 2))
+            # The g-g ellipse (as in the planner); keep a tenth of a_x's axis even when the
+            # lateral demand exceeds the limit.
+            room = a_long * np.sqrt(np.maximum(1.0 - (a_y / a_tot) ** 2, 0.01))
             a_min = np.maximum(a_min, -room)
             a_max = np.minimum(a_max, room)
         return np.minimum(a_min, a_max), a_max

@@ -159,7 +159,7 @@ class BestLapSettings:
     car_width : float
         Body width for the e_y bounds, m.
     margin : float or None
-        Clearance to the track edge, m (None: 0.5 with walls, 0.3 open, as the planner).
+        Clearance to the track edge, m (None: 0.8 with walls, 0.3 open, as the planner).
     v_min : float
         Lower bound on v_x, m/s.
     v_top : float

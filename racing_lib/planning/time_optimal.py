@@ -23,9 +23,11 @@ Formulation choices, from the measurements in MEASURED.md:
   dynamics defect by the scale of its state; the objective by a reference lap time.
 * **Exact Hessian** (CasADi's algorithmic differentiation of an SX graph).
 * **Combined slip**: the tire acceleration a_x and the lateral acceleration a_y share the friction
-  ellipse ``a_x^2 + a_y^2 <= a_peak^2`` (``friction_ellipse``; ``a_peak`` is the tyres' peak,
-  :meth:`racing_lib.model.ModelParams.peak_acceleration`); the model's lateral tire forces do not
-  know about braking, the simulated car's tires do.
+  ellipse ``(a_x / a_brake)^2 + (a_y / a_peak)^2 <= 1`` (``friction_ellipse``; ``a_peak`` is the
+  tyres' peak, :meth:`racing_lib.model.ModelParams.peak_acceleration`, ``a_brake`` the pedal
+  map's full brake, both identified: the g-g diagram); the model's lateral tire forces do not know
+  about braking, the simulated car's tires do. The rear tyres also carry the drive force inside
+  their own friction circle (``drive_axle_circle``).
 * **State-dependent a_x limits** (paper, Appendix C): a_x between the pedal map's value at full
   brake and at full throttle. Our pedal map is affine in the state apart from its power limit, so
   by default (``pedal_limits="exact"``) they are imposed exactly as constraints ``-a_brake <=
@@ -86,7 +88,7 @@ class TimeOptimalSettings:
     car_width : float
         Body width, m.
     margin : float or None
-        Clearance to the track edge, m (None: 0.5 with walls, 0.3 open).
+        Clearance to the track edge, m (None: 0.8 with walls, 0.3 open).
     delta_max : float
         Steering angle bound, rad.
     v_min : float
@@ -97,6 +99,10 @@ class TimeOptimalSettings:
         Bound the slip angles by the Pacejka peak.
     friction_ellipse : bool
         Couple a_x and a_y through the friction ellipse.
+    drive_axle_circle : bool
+        Keep the drive force and the rear lateral force inside the rear tyres' friction circle
+        (the car is rear-wheel driven): without it the plan accelerates out of corners harder
+        than the car's traction control allows.
     pedal_limits : {"iterate", "exact"}
         How the state-dependent a_x limits are imposed (see the module docstring).
     max_outer : int
@@ -130,6 +136,7 @@ class TimeOptimalSettings:
     e_psi_max: float = 1.0
     slip_limit: bool = True
     friction_ellipse: bool = True
+    drive_axle_circle: bool = True
     pedal_limits: str = "exact"
     max_outer: int = 4
     outer_tol: float = 0.05
@@ -226,7 +233,16 @@ class _Problem:
             ub_path += [1.0, 1.0]
         if st.friction_ellipse:
             grip = params.peak_acceleration()
-            path.append((z[rows["AX"]] / grip) ** 2 + (terms["a_y"] / grip) ** 2)
+            grip_x = min(grip, params.pedal.full_brake())  # the g-g diagram's braking axis
+            path.append((z[rows["AX"]] / grip_x) ** 2 + (terms["a_y"] / grip) ** 2)
+            lb_path.append(-np.inf)
+            ub_path.append(1.0)
+        if st.drive_axle_circle:
+            # Rear-wheel drive: the rear tyres alone carry the drive force, on top of their
+            # share of the cornering force, inside their own friction circle.
+            f_rear = params.mu * params.D_r * terms["F_zr"]
+            f_drive = params.m * ca.fmax(z[rows["AX"]], 0.0)
+            path.append((f_drive**2 + terms["F_yr"] ** 2) / f_rear**2)
             lb_path.append(-np.inf)
             ub_path.append(1.0)
         if st.pedal_limits == "exact":
