@@ -1,9 +1,9 @@
 """The ``racing-lib`` command.
 
-Sub-commands (see ``racing-lib --help``): ``tracks``, ``plan``, ``lap``, ``tune``. With ``--json``
-a command prints exactly one JSON object on standard output; everything meant for a person goes to
-standard error. Errors of racing_lib are printed as one line (``error: ...``) with exit status
-2, never as a traceback.
+Sub-commands (see ``racing-lib --help``): ``tracks``, ``plan``, ``lap``, ``tune``, ``ablation``.
+With ``--json`` a command prints exactly one JSON object on standard output; everything meant for a
+person goes to standard error. Errors of racing_lib are printed as one line (``error: ...``) with
+exit status 2, never as a traceback.
 """
 
 from __future__ import annotations
@@ -310,6 +310,34 @@ def cmd_tune(args: argparse.Namespace) -> int:
 
 
 # --------------------------------------------------------------------------------------------------
+# ablation
+
+
+def cmd_ablation(args: argparse.Namespace) -> int:
+    """The paper's Table I and Table II on the simulated car (cached rows are reused)."""
+    from racing_lib.ablation import DEFAULT_OUT, format_table, run_ablation
+
+    names = [n.strip() for n in args.rows.split(",") if n.strip()] if args.rows else None
+    rows = run_ablation(
+        names,
+        track=args.track,
+        trials=args.ablation_trials,
+        seed=args.seed,
+        out_dir=args.out or DEFAULT_OUT,
+        workers=args.workers,
+        spacing=args.spacing,
+        progress=False,
+        log=_say,
+    )
+    if args.json:
+        # The per-row files in --out hold the profiles; stdout stays a table of numbers.
+        _emit_json({"rows": [{k: v for k, v in r.items() if k != "profile"} for r in rows]})
+    else:
+        print(format_table(rows))
+    return 0
+
+
+# --------------------------------------------------------------------------------------------------
 # argument parsing
 
 
@@ -384,6 +412,26 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0, help="seed of CMA-ES and of the laps")
     p.add_argument("--out", default="tuned_weights.json", help="where to write the weights")
     p.set_defaults(func=cmd_tune)
+
+    p = sub.add_parser("ablation", help="the paper's Table I and II (cached rows are reused)")
+    p.add_argument("--track", help="only the rows of this track (expressway or shortcut)")
+    p.add_argument("--rows", help="comma-separated row names, e.g. main,no-drag (default: all)")
+    # Its own dest: the default (10, or 2 in fast mode) is decided by racing_lib.ablation.
+    p.add_argument(
+        "--trials",
+        dest="ablation_trials",
+        type=int,
+        metavar="N",
+        help="seeded trials per row (default 10; 2 in fast mode)",
+    )
+    p.add_argument("--seed", type=int, default=0, help="seed of the first trial (default 0)")
+    p.add_argument("--workers", type=int, default=2, help="parallel lap processes (default 2)")
+    p.add_argument("--out", help="cache folder of rows and plans (default runs/ablation)")
+    p.add_argument(
+        "--spacing", type=float, help="plan node spacing in m (default: the planners' 3 m)"
+    )
+    p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
+    p.set_defaults(func=cmd_ablation)
     return parser
 
 

@@ -21,7 +21,7 @@ import time
 from collections.abc import Callable, Iterable, Sequence
 from concurrent.futures import Executor
 from dataclasses import asdict, dataclass, field
-from typing import Any, Protocol
+from typing import Any, Protocol, TypeVar
 
 import numpy as np
 
@@ -366,18 +366,21 @@ def summarize(metrics: Iterable[LapMetrics]) -> dict[str, float | int | None]:
     }
 
 
+_T = TypeVar("_T")
+
+
 def run_trials(
-    lap: Callable[[int], LapMetrics],
+    lap: Callable[[int], _T],
     seeds: Iterable[int],
     executor: Executor | None = None,
-) -> list[LapMetrics]:
+) -> list[_T]:
     """Run ``lap(seed)`` for every seed, serially or through any ``concurrent.futures.Executor``.
 
     Parameters
     ----------
     lap : callable
-        Takes a seed and returns the lap's metrics. With a process pool it must be picklable
-        (a module-level function or a ``functools.partial`` of one).
+        Takes a seed and returns the lap's metrics (or any result of one trial). With a process
+        pool it must be picklable (a module-level function or a ``functools.partial`` of one).
     seeds : iterable of int
         One trial per seed; results come back in the same order.
     executor : Executor, optional

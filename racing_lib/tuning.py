@@ -996,6 +996,13 @@ def _read_tuned_file() -> dict[str, Any]:
     return data.get("configs", {}) if isinstance(data, dict) else {}
 
 
+def _start_label(initial: str | Mapping[str, float] | None) -> str:
+    """Where a tuning run started, for the shipped file."""
+    if initial is None:
+        return "defaults"
+    return f"tuned '{initial}'" if isinstance(initial, str) else "given weights"
+
+
 def _history_summary(history: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
     """Per generation: best objective so far, the generation's median, step size, elapsed time."""
     return [
@@ -1050,11 +1057,18 @@ def tuned_weights(config: str = "main") -> dict[str, float] | None:
     return {str(k): float(v) for k, v in entry["weights"].items()}
 
 
-def config_spec(config: str, track: Any, params: Any = None, **plan_kwargs: Any) -> Any:
-    """The :class:`~racing_lib.experiment.LapSpec` of a configuration of :data:`TUNING_CONFIGS`.
+def _config(config: str) -> dict[str, Any]:
+    if config not in TUNING_CONFIGS:
+        raise ControlError(
+            f"unknown tuning configuration {config!r}; choose one of {', '.join(TUNING_CONFIGS)}."
+        )
+    return TUNING_CONFIGS[config]
 
-    Plans ``track`` with the configuration's method and model options (about 20 s for the
-    time-optimal planner on the expressway).
+
+def config_plan(config: str, track: Any, params: Any = None, **plan_kwargs: Any) -> Any:
+    """The plan of a configuration of :data:`TUNING_CONFIGS`: its method and model options.
+
+    About 20 s for the time-optimal planner on the expressway.
 
     Parameters
     ----------
@@ -1066,32 +1080,75 @@ def config_spec(config: str, track: Any, params: Any = None, **plan_kwargs: Any)
         Planning parameters (default: the identified set, ``racing_lib.sysid.identified_params``).
     **plan_kwargs
         Passed on to :func:`racing_lib.planning.plan`.
+
+    Returns
+    -------
+    PlanResult
+        A converged plan.
+
+    Raises
+    ------
+    ControlError
+        Unknown configuration, or a plan that did not converge.
     """
-    from racing_lib.experiment import LapSpec
     from racing_lib.model import ModelOptions
     from racing_lib.planning import plan
     from racing_lib.sysid import identified_params
 
-    if config not in TUNING_CONFIGS:
-        raise ControlError(
-            f"unknown tuning configuration {config!r}; choose one of {', '.join(TUNING_CONFIGS)}."
-        )
-    cfg = TUNING_CONFIGS[config]
-    options = ModelOptions(**cfg["options"])
+    cfg = _config(config)
     if params is None:
         params = identified_params()
+    options = ModelOptions(**cfg["options"])
     planned = plan(track, method=cfg["method"], params=params, options=options, **plan_kwargs)
     if not planned.success:
         raise ControlError(
             f"the {cfg['method']} plan of configuration {config!r} failed ({planned.status}); "
             "tune on a plan that converged (see racing_lib.planning.plan)."
         )
+    return planned
+
+
+def config_spec(
+    config: str,
+    track: Any,
+    params: Any = None,
+    *,
+    trajectory: Any = None,
+    weights: dict[str, float] | None = None,
+    **plan_kwargs: Any,
+) -> Any:
+    """The :class:`~racing_lib.experiment.LapSpec` of a configuration of :data:`TUNING_CONFIGS`.
+
+    Plans ``track`` with :func:`config_plan` unless a ``trajectory`` is given.
+
+    Parameters
+    ----------
+    config : str
+        A name of :data:`TUNING_CONFIGS`.
+    track : Track
+        The track.
+    params : ModelParams, optional
+        Planning parameters (default: the identified set, ``racing_lib.sysid.identified_params``).
+    trajectory : Trajectory, optional
+        A plan already made for this configuration (for example loaded from a cache): no planning.
+    weights : dict, optional
+        MPC weights of the spec (default: the MPC's defaults).
+    **plan_kwargs
+        Passed on to :func:`racing_lib.planning.plan`.
+    """
+    from racing_lib.experiment import LapSpec
+    from racing_lib.model import ModelOptions
+
+    cfg = _config(config)
+    if trajectory is None:
+        trajectory = config_plan(config, track, params, **plan_kwargs).trajectory
     return LapSpec(
         track=track,
-        trajectory=planned.trajectory,
+        trajectory=trajectory,
         controller=cfg["controller"],
         smooth_transition=bool(cfg.get("smooth_transition", True)),
-        options=options,
+        options=ModelOptions(**cfg["options"]),
+        weights=weights,
     )
 
 
@@ -1106,6 +1163,7 @@ def generate_tuned_weights(
     out: str | os.PathLike[str] | None = None,
     work_dir: str | os.PathLike[str] | None = None,
     progress: bool = True,
+    initial: str | Mapping[str, float] | None = None,
 ) -> dict[str, TuningResult]:
     """Tune the weights of configurations and write them to the shipped JSON file.
 
@@ -1131,8 +1189,19 @@ def generate_tuned_weights(
         Folder for the per-configuration checkpoints, so that an interrupted generation resumes.
     progress : bool
         Progress bars.
+    initial : str or dict, optional
+        Where CMA-ES starts: the MPC's default weights (None), the shipped tuned weights of another
+        configuration (its name, e.g. ``'main'``: the ablations start from the main result, so a
+        shorter budget suffices), or explicit weights.
     """
     from racing_lib.track import Track, load_track
+
+    start = tuned_weights(initial) if isinstance(initial, str) else initial
+    if isinstance(initial, str) and start is None:
+        raise ControlError(
+            f"no tuned weights shipped for {initial!r} to start from; tune it first or pass "
+            "initial=None."
+        )
 
     trk = track if isinstance(track, Track) else load_track(str(track))
     target = (
@@ -1150,6 +1219,7 @@ def generate_tuned_weights(
         res = tune_weights(
             spec,
             seeds,
+            space=mpc_weight_space(start),
             settings=settings,
             executor=executor,
             workers=workers,
@@ -1176,6 +1246,7 @@ def generate_tuned_weights(
                 "seeds": list(_seed_tuple(seeds)),
                 "generations": res.generations,
                 "evaluations": res.evaluations,
+                "started_from": _start_label(initial),
                 "history": _history_summary(res.history),
                 "settings": dataclasses.asdict(settings or TuningSettings.default()),
                 "created_utc": time.strftime("%Y-%m-%dT%H:%MZ", time.gmtime()),
@@ -1196,6 +1267,7 @@ __all__ = [
     "SearchSpace",
     "TuningResult",
     "TuningSettings",
+    "config_plan",
     "config_spec",
     "evaluate_nominal_gains",
     "evaluate_weights",
