@@ -138,91 +138,38 @@ def cmd_plan(args: argparse.Namespace) -> int:
 
 def cmd_lap(args: argparse.Namespace) -> int:
     """Drive laps in closed loop and report their metrics."""
-    from racing_lib.experiment import LapSpec, drive_lap, summarize
-    from racing_lib.track import load_track
+    from racing_lib.pipeline import race
 
-    track = load_track(args.track)
-    if args.plan:
-        from racing_lib.planning.trajectory import Trajectory
-
-        trajectory = Trajectory.load_csv(args.plan, track=track)
-        _say(f"loaded plan {args.plan} (planned lap {trajectory.lap_time:.2f} s)")
-    else:
-        _say(f"planning {track.name} with method '{args.method}' ...")
-        trajectory = _make_plan(args, track).trajectory
-        _say(f"planned lap time {trajectory.lap_time:.2f} s")
-
-    if args.controller == "nominal":
-        from racing_lib.control.nominal import MODERATE_SPEED_SCALE
-
-        # Pure pursuit has no model of grip: it drives the plan at a moderate fraction of its speed.
-        trajectory = trajectory.scale_speed(MODERATE_SPEED_SCALE)
-        _say(
-            f"nominal controller: reference at {MODERATE_SPEED_SCALE:.0%} of the planned speed "
-            f"({trajectory.lap_time:.2f} s)"
-        )
-
-    weights = None
-    if args.controller != "nominal":
-        from racing_lib.tuning import configuration_name, tuned_weights
-
-        method = trajectory.method or args.method
-        config = configuration_name(
-            args.controller, method, _model_options(args), not args.no_smooth_transition
-        )
-        weights = tuned_weights(config) if config else None
-        _say(
-            f"MPC weights: tuned for '{config}'"
-            if weights
-            else "MPC weights: defaults (no tuned set shipped for this configuration)"
-        )
-
-    spec = LapSpec(
-        track=track,
-        trajectory=trajectory,
-        controller=args.controller,
-        smooth_transition=not args.no_smooth_transition,
-        options=_model_options(args),
-        weights=weights,
-    )
-    seeds = [args.seed + i for i in range(args.trials)]
     out_dir = FilePath(args.out) if args.out else None
-    results = []
-    for seed in seeds:
-        result = drive_lap(spec, seed=seed, progress=not args.json and args.trials == 1)
-        results.append(result)
-        m = result.metrics
-        _say(
-            f"seed {seed}: "
-            + (f"lap {m.lap_time_s:.2f} s" if m.completed else "lap NOT completed")
-            + f", v_x MAE {m.vx_mae_mps:.2f} m/s, e_y MAE {m.ey_mae_m:.2f} m, "
-            f"wall contacts {m.wall_contacts}, controller {m.solve_time_ms_median:.2f} ms median"
-        )
+
+    def save_log(lap) -> None:
+        # Saved as each lap ends: an interrupted run of many trials keeps the laps already driven.
         if out_dir is not None:
-            result.log.save(str(out_dir / f"log_seed{seed}.npz"))
-    metrics = [r.metrics for r in results]
-    summary = summarize(metrics)
-    report = {
-        "track": track.name,
-        "controller": args.controller,
-        "planned_lap_time_s": float(trajectory.lap_time),
-        "trials": [_trial_fields(m) for m in metrics],
-        "summary": summary,
-    }
+            out_dir.mkdir(parents=True, exist_ok=True)
+            lap.log.save(str(out_dir / f"log_seed{lap.metrics.seed}.npz"))
+
+    result = race(
+        args.track,
+        method=args.method,
+        controller=args.controller,
+        seed=args.seed,
+        trials=args.trials,
+        options=_model_options(args),
+        smooth_transition=not args.no_smooth_transition,
+        reference=args.plan,
+        progress=not args.json and args.trials == 1,
+        report=_say,
+        on_lap=save_log,
+    )
+    report = result.summary()
     if out_dir is not None:
-        _save_lap_outputs(out_dir, track, trajectory, results, report)
+        _save_lap_outputs(out_dir, result.track, result.reference, result.laps, report)
         _say(f"figures, logs and summary written to {out_dir}/")
     if args.json:
         _emit_json(report)
     else:
         _print_summary(report)
-    return 0 if summary["completed"] == len(seeds) else 1
-
-
-def _trial_fields(m) -> dict[str, Any]:
-    d = m.to_dict()
-    d.pop("controller_stats", None)
-    return d
+    return 0 if result.completed else 1
 
 
 def _print_summary(report: dict[str, Any]) -> None:

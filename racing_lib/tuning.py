@@ -1003,8 +1003,22 @@ def _start_label(initial: str | Mapping[str, float] | None) -> str:
     return f"tuned '{initial}'" if isinstance(initial, str) else "given weights"
 
 
-def _history_summary(history: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
-    """Per generation: best objective so far, the generation's median, step size, elapsed time."""
+def history_summary(history: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
+    """Condense a tuning history to what is plotted and shipped, one dict per generation.
+
+    Parameters
+    ----------
+    history : sequence of dict
+        ``TuningResult.history`` (or ``tune(...).history``): per generation the objectives of
+        every candidate, the best so far, the step size and the elapsed time.
+
+    Returns
+    -------
+    list of dict
+        ``generation``, ``best_objective`` (best so far), ``median_objective`` (of that
+        generation's candidates), ``sigma`` (step size, log10 units) and ``elapsed_s`` (s), the
+        same fields as :func:`tuning_history`.
+    """
     return [
         {
             "generation": int(h["generation"]),
@@ -1247,7 +1261,7 @@ def generate_tuned_weights(
                 "generations": res.generations,
                 "evaluations": res.evaluations,
                 "started_from": _start_label(initial),
-                "history": _history_summary(res.history),
+                "history": history_summary(res.history),
                 "settings": dataclasses.asdict(settings or TuningSettings.default()),
                 "created_utc": time.strftime("%Y-%m-%dT%H:%MZ", time.gmtime()),
             }
@@ -1272,6 +1286,7 @@ __all__ = [
     "evaluate_nominal_gains",
     "evaluate_weights",
     "generate_tuned_weights",
+    "history_summary",
     "mpc_weight_space",
     "nominal_gain_space",
     "tune",

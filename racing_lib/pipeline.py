@@ -1,0 +1,394 @@
+"""The whole pipeline in one call: track -> plan -> (tuned) controller -> closed-loop laps.
+
+:func:`race` strings together what the chapters build one at a time: it loads a track
+(:func:`racing_lib.track.load_track`), plans a lap (:func:`racing_lib.planning.plan`), picks the
+MPC weights that CMA-ES tuned for that set-up (:func:`racing_lib.tuning.configuration_name`,
+:func:`racing_lib.tuning.tuned_weights`), and drives seeded flying laps of the simulated car
+(:class:`racing_lib.experiment.LapSpec`, :func:`racing_lib.experiment.drive_lap`). It adds no
+algorithm of its own. Taught in notebook 00 (the introduction); ``racing-lib lap`` does the same
+from the command line.
+
+Examples
+--------
+The paper's main experiment on the default track (about 20 s: most of it is the planning):
+
+>>> from racing_lib.pipeline import race
+>>> result = race("expressway", method="time-optimal", controller="coupled-mpc")  # doctest: +SKIP
+>>> print(result.table())  # doctest: +SKIP
+
+A quick one (a few seconds):
+
+>>> result = race("expressway", method="centerline", controller="nominal")
+>>> result.completed, result.plan.method
+(True, 'centerline')
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from racing_lib.errors import ControlError, RacingLibError
+from racing_lib.experiment import LapMetrics, LapResult, LapSpec, drive_lap, summarize
+from racing_lib.planning import PlanResult, Trajectory, plan
+from racing_lib.track import Track, load_track
+
+#: Values of ``race(weights=...)`` that name a choice rather than give the weights.
+WEIGHT_CHOICES = ("tuned", "default")
+
+
+@dataclass
+class RaceResult:
+    """What :func:`race` returns: the plan, the lap specification and the laps driven.
+
+    Attributes
+    ----------
+    track : Track
+        The track driven.
+    plan : PlanResult or None
+        The planner's result; None when a ready-made reference was given to :func:`race`.
+    spec : LapSpec
+        The lap as driven (track, reference, controller, weights, options); pass it to
+        :func:`racing_lib.experiment.drive_lap` to drive it again.
+    laps : list of LapResult
+        One lap per seed, in the order of :attr:`seeds`.
+    weights_source : str
+        Where the controller's weights came from, in words (for example
+        ``"tuned for 'main'"`` or ``"defaults"``).
+    configuration : str or None
+        The entry of :data:`racing_lib.tuning.TUNING_CONFIGS` this set-up corresponds to.
+    """
+
+    track: Track
+    plan: PlanResult | None
+    spec: LapSpec
+    laps: list[LapResult] = field(repr=False)
+    weights_source: str = "defaults"
+    configuration: str | None = None
+
+    # -- shortcuts -------------------------------------------------------------------------------
+    @property
+    def lap(self) -> LapResult:
+        """The first lap (the only one unless ``trials > 1``)."""
+        return self.laps[0]
+
+    @property
+    def metrics(self) -> LapMetrics:
+        """Metrics of the first lap."""
+        return self.laps[0].metrics
+
+    @property
+    def reference(self) -> Trajectory:
+        """The trajectory the controller tracked (the plan; for the nominal controller a slower
+        copy of it)."""
+        return self.spec.trajectory
+
+    @property
+    def planned_lap_time(self) -> float:
+        """Lap time of the reference the controller tracked, s (equal to the plan's for MPCs)."""
+        return float(self.spec.trajectory.lap_time)
+
+    @property
+    def seeds(self) -> list[int | None]:
+        """The seeds of the laps, in order."""
+        return [lap.metrics.seed for lap in self.laps]
+
+    @property
+    def completed(self) -> bool:
+        """True when every lap was completed."""
+        return all(lap.metrics.completed for lap in self.laps)
+
+    @property
+    def lap_time_gap(self) -> float:
+        """Mean closed-loop lap time over the reference's, minus one, % (NaN if none completed)."""
+        stats = summarize(lap.metrics for lap in self.laps)
+        if not stats["completed"]:
+            return math.nan
+        return 100.0 * (float(stats["lap_time_mean_s"]) / self.planned_lap_time - 1.0)
+
+    # -- reports ---------------------------------------------------------------------------------
+    def summary(self) -> dict[str, Any]:
+        """The fields of ``racing-lib lap --json``.
+
+        Returns
+        -------
+        dict
+            ``track``, ``controller``, ``planned_lap_time_s`` (of the reference tracked, s),
+            ``trials`` (one dict of :class:`~racing_lib.experiment.LapMetrics` fields per lap,
+            without the controller's counters) and ``summary`` (lap-time mean, std and best over
+            the completed laps, s, and their number); values of laps not completed are None.
+        """
+        metrics = [lap.metrics for lap in self.laps]
+        trials = []
+        for m in metrics:
+            fields = m.to_dict()
+            fields.pop("controller_stats", None)
+            trials.append(fields)
+        return {
+            "track": self.track.name,
+            "controller": self.spec.controller,
+            "planned_lap_time_s": self.planned_lap_time,
+            "trials": trials,
+            "summary": summarize(metrics),
+        }
+
+    def table(self) -> str:
+        """A short plain-text table of what the laps achieved (one row per quantity).
+
+        With several trials, errors are averaged over the laps and lap times summarized as
+        mean +- std (best), over the completed laps.
+        """
+        metrics = [lap.metrics for lap in self.laps]
+        stats = summarize(metrics)
+        n = len(metrics)
+        method = self.plan.method if self.plan is not None else (self.reference.method or "given")
+        rows: list[tuple[str, str]] = []
+        if self.plan is not None:
+            rows.append(
+                (
+                    "plan",
+                    f"{method}, {self.plan.status}, {self.plan.iterations} iterations, "
+                    f"{self.plan.solve_time:.1f} s",
+                )
+            )
+        rows.append(("controller", f"{self.spec.controller}, weights {self.weights_source}"))
+        rows.append(("reference lap time", f"{self.planned_lap_time:.2f} s"))
+        if stats["completed"]:
+            mean = float(stats["lap_time_mean_s"])
+            lap_text = (
+                f"{mean:.2f} s"
+                if n == 1
+                else f"{mean:.2f} +- {stats['lap_time_std_s']:.2f} s "
+                f"(best {stats['lap_time_min_s']:.2f} s)"
+            )
+            rows.append(
+                ("closed-loop lap time", f"{lap_text}, {self.lap_time_gap:+.1f} % on the reference")
+            )
+        rows.append(("laps completed", f"{stats['completed']} of {n}"))
+
+        def avg(name: str) -> float:
+            return float(np.nanmean([getattr(m, name) for m in metrics]))
+
+        vx_err = f"{avg('vx_mae_mps'):.2f} / {avg('vx_max_err_mps'):.2f} m/s"
+        rows.append(("v_x error mean / max", vx_err))
+        rows.append(("e_y error mean / max", f"{avg('ey_mae_m'):.2f} / {avg('ey_max_m'):.2f} m"))
+        walls = sum(m.wall_contacts for m in metrics)
+        wall_time = sum(m.wall_contact_time_s for m in metrics)
+        rows.append(("wall contacts", f"{walls} ({wall_time:.1f} s in contact)"))
+        if self.track.boundary == "open":
+            rows.append(("time off the track", f"{sum(m.offtrack_time_s for m in metrics):.1f} s"))
+        rows.append(
+            (
+                "controller step",
+                f"{avg('solve_time_ms_median'):.1f} ms median, "
+                f"{avg('solve_time_ms_p99'):.1f} ms p99 (period 100 ms)",
+            )
+        )
+        width = max(len(k) for k, _ in rows)
+        title = f"{self.track.name}: {n} lap{'s' if n > 1 else ''} of the simulated car"
+        return "\n".join([title] + [f"  {k:<{width}}  {v}" for k, v in rows])
+
+    def __str__(self) -> str:
+        return self.table()
+
+
+def _resolve_weights(
+    weights: str | Mapping[str, float] | None,
+    controller: str,
+    method: str,
+    options: Any,
+    smooth_transition: bool,
+) -> tuple[dict[str, float] | None, str, str | None]:
+    """The MPC weights to drive with, a description of where they came from, and the config."""
+    from racing_lib.tuning import configuration_name, tuned_weights
+
+    config = configuration_name(controller, method, options, smooth_transition)
+    if controller == "nominal":
+        return None, "not used (the nominal controller has gains)", config
+    if weights is None or weights == "default":
+        return None, "defaults", config
+    if weights == "tuned":
+        tuned = tuned_weights(config) if config else None
+        if tuned:
+            return tuned, f"tuned for '{config}'", config
+        why = f"none shipped for '{config}'" if config else "no tuned configuration matches"
+        return None, f"defaults ({why})", config
+    return {str(k): float(v) for k, v in weights.items()}, "given", config
+
+
+def _check_choices(controller: str, weights: str | Mapping[str, float] | None, trials: int) -> None:
+    """Refuse bad names before any planning (which can take tens of seconds)."""
+    from racing_lib.control import CONTROLLER_NAMES
+
+    if controller not in CONTROLLER_NAMES:
+        raise ControlError(
+            f"unknown controller {controller!r}; choose one of {', '.join(CONTROLLER_NAMES)}."
+        )
+    if isinstance(weights, str) and weights not in WEIGHT_CHOICES:
+        raise ControlError(
+            f"weights={weights!r} is not a choice; use 'tuned' (the shipped CMA-ES weights), "
+            "'default' (the MPC's defaults) or a dict such as {'w_ey': 5.0}."
+        )
+    if weights is not None and not isinstance(weights, str | Mapping):
+        raise ControlError(
+            f"weights must be 'tuned', 'default', None or a dict, got {type(weights).__name__}."
+        )
+    if isinstance(weights, Mapping) and controller == "nominal":
+        raise ControlError(
+            "the nominal controller takes no MPC weights; drop weights= or use an MPC controller."
+        )
+    if int(trials) < 1:
+        raise RacingLibError(f"trials must be at least 1, got {trials}.")
+
+
+def _lap_line(seed: int | None, m: LapMetrics) -> str:
+    lap = f"lap {m.lap_time_s:.2f} s" if m.completed else "lap NOT completed"
+    return (
+        f"seed {seed}: {lap}, v_x MAE {m.vx_mae_mps:.2f} m/s, e_y MAE {m.ey_mae_m:.2f} m, "
+        f"wall contacts {m.wall_contacts}, controller {m.solve_time_ms_median:.2f} ms median"
+    )
+
+
+def race(
+    track: str | os.PathLike[str] | Track = "expressway",
+    method: str = "time-optimal",
+    controller: str = "coupled-mpc",
+    seed: int = 0,
+    weights: str | Mapping[str, float] | None = "tuned",
+    *,
+    trials: int = 1,
+    options: Any = None,
+    smooth_transition: bool = True,
+    reference: Trajectory | str | os.PathLike[str] | None = None,
+    plan_kwargs: Mapping[str, Any] | None = None,
+    progress: bool = False,
+    report: Callable[[str], None] | None = None,
+    on_lap: Callable[[LapResult], None] | None = None,
+) -> RaceResult:
+    """Plan a lap of a track and drive it in closed loop with the simulated car.
+
+    The three modules of the paper in one call: the planning model (identified from driving
+    data, chapter 02), the planner (chapters 03-04) and the tracking controller (chapter 05),
+    with the weights CMA-ES tuned for this set-up (chapter 06) when the package ships them.
+
+    Parameters
+    ----------
+    track : str, path or Track
+        A built-in track name (``'expressway'``, ``'shortcut'``), a track CSV file, or a Track.
+    method : {'time-optimal', 'curvature', 'centerline'}
+        The planner (:func:`racing_lib.planning.plan`); ignored when ``reference`` is given.
+    controller : {'coupled-mpc', 'decoupled-mpc', 'nominal'}
+        The tracking controller. The nominal (pure-pursuit) driver has no model of grip: as on the
+        command line, it tracks the plan at
+        :data:`~racing_lib.control.nominal.MODERATE_SPEED_SCALE` of its speed.
+    seed : int
+        Seed of the first lap's randomness (friction variation, actuation noise); lap ``i`` of
+        ``trials`` uses ``seed + i``.
+    weights : 'tuned', 'default', None or dict
+        MPC weights. ``'tuned'``: the CMA-ES weights shipped for this set-up
+        (:func:`racing_lib.tuning.tuned_weights` of :func:`~racing_lib.tuning.configuration_name`),
+        the MPC's defaults when none are shipped; ``'default'`` or None: the defaults; a dict
+        (fields of ``MPCSettings`` such as ``w_ey``): those weights.
+    trials : int
+        Number of seeded laps.
+    options : ModelOptions, optional
+        Model effects of the planner and of the MPC's prediction (default: drag and longitudinal
+        weight transfer, as in the paper's main experiment).
+    smooth_transition : bool
+        MPC: linearize along the blend from the measured state to the plan (the paper's choice).
+    reference : Trajectory or path, optional
+        A plan made before (a :class:`~racing_lib.planning.Trajectory` or a plan CSV written by
+        ``racing-lib plan --out``); the planning step is then skipped.
+    plan_kwargs : dict, optional
+        More arguments of :func:`racing_lib.planning.plan` (``params``, ``spacing``, ``start``,
+        solver settings).
+    progress : bool
+        Show a progress bar over each lap.
+    report : callable, optional
+        Called with one line of text at each step (planning, weights, each lap), for example
+        ``print``; silent when omitted.
+    on_lap : callable, optional
+        Called with each :class:`~racing_lib.experiment.LapResult` as soon as that lap ends, for
+        example to save its log, so that an interrupted run of many trials keeps the laps done.
+
+    Returns
+    -------
+    RaceResult
+        The plan, the lap specification and the laps; :meth:`RaceResult.table` summarizes them.
+
+    Raises
+    ------
+    TrackError
+        Unknown track name or an unusable track file (the message lists the built-in tracks).
+    PlanningError
+        Unknown planning method, or a planner that fails.
+    ControlError
+        Unknown controller or weights, checked before anything is planned.
+    RacingLibError
+        ``trials`` below 1.
+    """
+    say = report or (lambda _line: None)
+    _check_choices(controller, weights, trials)
+    trk = track if isinstance(track, Track) else load_track(os.fspath(track))
+
+    planned: PlanResult | None = None
+    if reference is None:
+        say(f"planning {trk.name} ({trk.length:.0f} m) with method '{method}' ...")
+        planned = plan(trk, method=method, options=options, **dict(plan_kwargs or {}))
+        trajectory = planned.trajectory
+        plan_method = planned.method
+        say(f"planned lap time {trajectory.lap_time:.2f} s ({planned.status})")
+    elif isinstance(reference, Trajectory):
+        trajectory, plan_method = reference, reference.method or method
+    else:
+        trajectory = Trajectory.load_csv(os.fspath(reference), track=trk)
+        plan_method = trajectory.method or method
+        say(f"loaded plan {os.fspath(reference)} (planned lap {trajectory.lap_time:.2f} s)")
+
+    if controller == "nominal":
+        from racing_lib.control.nominal import MODERATE_SPEED_SCALE
+
+        # Pure pursuit has no model of grip: it drives the plan at a moderate fraction of its speed.
+        trajectory = trajectory.scale_speed(MODERATE_SPEED_SCALE)
+        say(
+            f"nominal controller: reference at {MODERATE_SPEED_SCALE:.0%} of the planned speed "
+            f"({trajectory.lap_time:.2f} s)"
+        )
+
+    lap_weights, source, config = _resolve_weights(
+        weights, controller, plan_method, options, smooth_transition
+    )
+    if controller != "nominal":
+        say(f"MPC weights: {source}")
+    spec = LapSpec(
+        track=trk,
+        trajectory=trajectory,
+        controller=controller,
+        smooth_transition=smooth_transition,
+        options=options,
+        weights=lap_weights,
+    )
+    laps = []
+    for i in range(int(trials)):
+        lap_seed = int(seed) + i
+        result = drive_lap(spec, seed=lap_seed, progress=progress)
+        say(_lap_line(lap_seed, result.metrics))
+        laps.append(result)
+        if on_lap is not None:
+            on_lap(result)
+    return RaceResult(
+        track=trk,
+        plan=planned,
+        spec=spec,
+        laps=laps,
+        weights_source=source,
+        configuration=config,
+    )
+
+
+__all__ = ["WEIGHT_CHOICES", "RaceResult", "race"]
