@@ -32,6 +32,7 @@ from racing_lib.planning.trajectory import Trajectory
 from racing_lib.sim import SimulatedCar
 from racing_lib.sysid import identified_params
 from racing_lib.track import load_track
+from racing_lib.tuning import configuration_name, tuned_weights
 
 PARTS = ("project", "reference", "linearize", "build", "qp", "pedal", "total")
 
@@ -187,6 +188,11 @@ def main() -> None:
     ap.add_argument("--steps", type=int, default=600, help="closed-loop steps per timing run")
     ap.add_argument("--seeds", type=int, nargs="+", default=[0])
     ap.add_argument("--ablation", action="store_true", help="also the decoupled and no-smooth MPC")
+    ap.add_argument(
+        "--default-weights",
+        action="store_true",
+        help="drive with the MPC's default weights, not the tuned ones",
+    )
     args = ap.parse_args()
 
     params = identified_params()
@@ -211,16 +217,51 @@ def main() -> None:
         )
 
     plan = make_plan(track, params, args.plan)
+
+    weights_said: set[tuple] = set()
+
+    def settings(plan: Trajectory, controller: str, **fixed) -> MPCSettings:
+        """The weights race() would drive this set-up with: its shipped CMA-ES set, else defaults.
+
+        Tuned weights belong to the plan they were tuned on: on the centerline plan (no tuned
+        configuration) the defaults are used, as racing_lib.pipeline.race does.
+        """
+        smooth = fixed.get("smooth_transition", True)
+        config = configuration_name(controller, plan.method, None, smooth)
+        tuned = None if args.default_weights or config is None else tuned_weights(config)
+        said = (controller, smooth, plan.method)
+        if said not in weights_said:  # once per table and controller, not once per seed
+            weights_said.add(said)
+            what = f"tuned for '{config}'" if tuned else "defaults"
+            print(f"  ({controller}{'' if smooth else ', no smoothing'}: weights {what})")
+        return MPCSettings(**fixed, **(tuned or {}))
+
     # Factories take the plan, so that each table drives the plan it is judged against.
-    controllers = [("coupled MPC", lambda p: CoupledMPC(p, params=params, track=track))]
+    controllers = [
+        (
+            "coupled MPC",
+            lambda p: CoupledMPC(
+                p, params=params, track=track, settings=settings(p, "coupled-mpc")
+            ),
+        )
+    ]
     if args.ablation:
-        no_smooth = MPCSettings(smooth_transition=False)
         controllers += [
             (
                 "coupled, no smoothing",
-                lambda p: CoupledMPC(p, params=params, track=track, settings=no_smooth),
+                lambda p: CoupledMPC(
+                    p,
+                    params=params,
+                    track=track,
+                    settings=settings(p, "coupled-mpc", smooth_transition=False),
+                ),
             ),
-            ("decoupled MPC", lambda p: DecoupledMPC(p, params=params, track=track)),
+            (
+                "decoupled MPC",
+                lambda p: DecoupledMPC(
+                    p, params=params, track=track, settings=settings(p, "decoupled-mpc")
+                ),
+            ),
         ]
     lap_rows(track, plan, params, args.seeds, controllers)
     if args.plan != "centerline":
