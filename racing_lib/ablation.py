@@ -1005,7 +1005,7 @@ def load_table(path: str | os.PathLike[str]) -> dict[str, Any]:
 def shipped_table() -> list[dict[str, Any]]:
     """The rows of the full-mode table shipped in ``racing_lib/data/ablation_table.json``.
 
-    Loads in milliseconds; notebook 07 reads it instead of recomputing (about an hour on two
+    Loads in milliseconds; notebook 07 reads it instead of recomputing (about five minutes on two
     cores). :func:`stale_rows` tells which rows the current code would compute differently.
 
     Raises

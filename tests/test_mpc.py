@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import os
 
 import numpy as np
 import pytest
@@ -482,3 +483,28 @@ def test_compiled_linearization_equals_the_interpreted_one(setups):
     interpreted = slow.linearize(xi, u, kappa, theta)
     for a, b in zip(compiled, interpreted, strict=True):
         np.testing.assert_allclose(a, b, rtol=1e-10, atol=1e-12)
+
+
+def test_compiled_code_goes_to_one_private_directory_shared_by_processes(tmp_path):
+    """Hundreds of controllers (a tuning run) must not leave hundreds of temporary directories."""
+    import stat
+    import subprocess
+    import sys
+
+    code = (
+        "from racing_lib.control.mpc import _jit_dir, _substep_linearization\n"
+        "from racing_lib.model import ModelOptions\n"
+        "from racing_lib.sysid import identified_params\n"
+        "_substep_linearization(identified_params(), ModelOptions(), 0.1, 2, jit=True)\n"
+        "print(_jit_dir())\n"
+    )
+    paths = {
+        subprocess.run(
+            [sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=tmp_path
+        ).stdout.strip()
+        for _ in range(2)
+    }
+    assert len(paths) == 1, paths
+    path = paths.pop()
+    info = os.lstat(path)
+    assert stat.S_ISDIR(info.st_mode) and info.st_mode & 0o077 == 0

@@ -368,11 +368,28 @@ def _substep_linearization(
 
 
 @functools.lru_cache(maxsize=1)
+@functools.cache
 def _jit_dir() -> str:
-    """A private temporary directory for compiled CasADi code (CasADi deletes its files when the
-    Function is destroyed; the empty directory stays)."""
+    """The directory for compiled CasADi code: one per user, reused by every process.
+
+    CasADi removes its files when a Function is destroyed (late in interpreter shutdown, so the
+    directory itself cannot be removed then), and ``jit_temp_suffix`` keeps the names of
+    concurrent processes apart. One shared directory therefore stays empty between runs, where a
+    fresh directory per controller would leave hundreds behind after a tuning run. If the name is
+    taken by something that is not our own private directory, a fresh one is used instead.
+    """
+    import os
+    import stat
     import tempfile
 
+    path = os.path.join(tempfile.gettempdir(), f"racing_lib_jit_{os.getuid()}")
+    try:
+        os.makedirs(path, mode=0o700, exist_ok=True)
+        info = os.lstat(path)
+        if stat.S_ISDIR(info.st_mode) and info.st_uid == os.getuid() and info.st_mode & 0o077 == 0:
+            return path
+    except OSError:
+        pass
     return tempfile.mkdtemp(prefix="racing_lib_jit_")
 
 
