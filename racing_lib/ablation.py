@@ -71,7 +71,7 @@ import numpy as np
 from racing_lib.config import fast_mode
 from racing_lib.errors import ControlError, PlanningError, RacingLibError, TrackError
 from racing_lib.experiment import LapMetrics, LapSpec, drive_lap, run_trials, summarize
-from racing_lib.io import atomic_write_text
+from racing_lib.io import atomic_write_text, jsonable
 from racing_lib.planning.trajectory import Trajectory
 from racing_lib.track import Track, load_track
 from racing_lib.tuning import (
@@ -448,7 +448,7 @@ def _get_plan(
         }
         if csv is not None and meta is not None:
             traj.save_csv(csv)
-            atomic_write_text(meta, json.dumps(_jsonable(info), indent=2, sort_keys=True) + "\n")
+            atomic_write_text(meta, json.dumps(jsonable(info), indent=2, sort_keys=True) + "\n")
             # Drive the plan as stored, so that a rerun from the cache drives the same numbers.
             traj = Trajectory.load_csv(csv, track=track)
         info["reused"] = False
@@ -566,21 +566,6 @@ def _trial(spec: LapSpec, seed: int, profile_seed: int | None = None) -> _TrialO
 # A row from its trials
 
 
-def _jsonable(obj: Any) -> Any:
-    """A JSON-ready copy: numpy values become Python ones, NaN and infinities None."""
-    if isinstance(obj, dict):
-        return {str(k): _jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, list | tuple):
-        return [_jsonable(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return _jsonable(obj.tolist())
-    if isinstance(obj, np.generic):
-        obj = obj.item()
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return None
-    return obj
-
-
 def _compact_json(obj: Any) -> str:
     """One line of JSON without spaces (the profiles are most of a row: keep files small)."""
     return json.dumps(obj, sort_keys=True, separators=(",", ":"), allow_nan=False)
@@ -683,7 +668,7 @@ def _row_result(
         "key_inputs": key_inputs,
         "profile": profile,
     }
-    return _jsonable(row_dict)
+    return jsonable(row_dict)
 
 
 # --------------------------------------------------------------------------------------------------

@@ -1,4 +1,4 @@
-"""Small file helpers shared by every module that writes: atomic writes.
+"""Small file helpers shared by every module that writes: atomic writes, JSON-ready values.
 
 A write goes to a temporary file in the same folder and is then renamed over the target, so an
 interrupted run leaves either the old file or the new one, never half of one.
@@ -7,10 +7,13 @@ interrupted run leaves either the old file or the new one, never half of one.
 from __future__ import annotations
 
 import json
+import math
 import os
 import tempfile
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 
 def atomic_write_bytes(path: str | os.PathLike[str], data: bytes) -> None:
@@ -41,3 +44,19 @@ def atomic_write_text(path: str | os.PathLike[str], text: str) -> None:
 def atomic_write_json(path: str | os.PathLike[str], obj: Any) -> None:
     """Write ``obj`` as indented JSON to ``path`` atomically."""
     atomic_write_text(path, json.dumps(obj, indent=2, sort_keys=True) + "\n")
+
+
+def jsonable(obj: Any) -> Any:
+    """A JSON-ready copy of ``obj``: NumPy arrays and scalars become Python values, tuples lists,
+    dict keys strings, and NaN or infinite floats None (JSON has no such numbers)."""
+    if isinstance(obj, dict):
+        return {str(k): jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [jsonable(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return jsonable(obj.tolist())
+    if isinstance(obj, np.generic):
+        obj = obj.item()
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    return obj

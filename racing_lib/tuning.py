@@ -55,7 +55,7 @@ import numpy as np
 
 from racing_lib.config import fast_mode
 from racing_lib.errors import ControlError, RacingLibError
-from racing_lib.io import atomic_write_bytes, atomic_write_json
+from racing_lib.io import atomic_write_bytes, atomic_write_json, jsonable
 
 # --------------------------------------------------------------------------------------------------
 # The objective of a closed-loop lap
@@ -556,21 +556,7 @@ class TuningResult:
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dict (non-finite numbers become None)."""
-        return _jsonable(dataclasses.asdict(self))
-
-
-def _jsonable(obj: Any) -> Any:
-    if isinstance(obj, dict):
-        return {str(k): _jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, list | tuple):
-        return [_jsonable(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return _jsonable(obj.tolist())
-    if isinstance(obj, np.generic):
-        obj = obj.item()
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return None
-    return obj
+        return jsonable(dataclasses.asdict(self))
 
 
 # --------------------------------------------------------------------------------------------------
@@ -681,7 +667,7 @@ class CmaTuner:
         atomic_write_bytes(out_dir / STATE_FILE, pickle.dumps(state))
         atomic_write_json(
             out_dir / HISTORY_FILE,
-            _jsonable(
+            jsonable(
                 {
                     "format": _FORMAT,
                     "space": self.space.to_dict(),
@@ -1244,7 +1230,7 @@ def generate_tuned_weights(
         results[name] = res
         # The defaults' score on the same laps, so a reader sees what tuning bought.
         at_defaults = evaluate_weights(spec, {}, _seed_tuple(seeds))
-        data["configs"][name] = _jsonable(
+        data["configs"][name] = jsonable(
             {
                 "weights": res.best_weights,
                 "objective": res.best_objective,

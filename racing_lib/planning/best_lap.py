@@ -54,8 +54,10 @@ from racing_lib.planning.curvature import DEFAULT_CAR_WIDTH, TrackGrid
 from racing_lib.planning.time_optimal import (
     TimeOptimalResult,
     TimeOptimalSettings,
+    ipopt_solver,
     lap_time_with_model,
     solve_time_optimal,
+    trapezoid_lap_time,
 )
 from racing_lib.planning.trajectory import Trajectory
 from racing_lib.sim import tyre_limits
@@ -353,8 +355,7 @@ class _Problem:
             - xs
             - 0.5 * ca.repmat(h, _NS, 1) * (F + F[:, nxt]) * ca.repmat(inv_scale, 1, n)
         )
-        w_node = 0.5 * (grid.ds + np.roll(grid.ds, 1))
-        lap = ca.mtimes(inv_sdot, ca.DM(w_node))
+        lap = trapezoid_lap_time(inv_sdot, grid)
         cmd = W[int(V.DCMD), :] * _SCALE[V.DCMD]
         reg = ca.sum2((cmd[:, nxt] - cmd) ** 2 / h)
         t_ref = float(grid.length / 20.0)
@@ -363,16 +364,7 @@ class _Problem:
             "f": (lap + st.w_dcmd * reg) / t_ref,
             "g": ca.vertcat(ca.vec(defect), ca.vec(P)),
         }
-        ipopt = {
-            "print_level": st.print_level,
-            "max_iter": st.max_iter,
-            "tol": st.tol,
-            "hessian_approximation": "exact",
-            "mu_strategy": "adaptive",
-            "sb": "yes",
-        }
-        ipopt.update(dict(st.ipopt_options))
-        self.solver = ca.nlpsol("best_lap", "ipopt", nlp, {"ipopt": ipopt, "print_time": False})
+        self.solver = ipopt_solver("best_lap", nlp, st)
         self.lbg = np.concatenate([np.zeros(_NS * n), np.tile(lb_path, n)])
         self.ubg = np.concatenate([np.zeros(_NS * n), np.tile(ub_path, n)])
         self.node_fn = node_fn

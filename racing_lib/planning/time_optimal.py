@@ -287,24 +287,14 @@ class _Problem:
         lbg = [np.zeros(_NXS * n), np.tile(lb_path, n)]
         ubg = [np.zeros(_NXS * n), np.tile(ub_path, n)]
         # Objective: lap time (trapezoid in 1/s_dot) + steering-rate regularization, over T_ref.
-        w_node = 0.5 * (grid.ds + np.roll(grid.ds, 1))
-        lap = ca.mtimes(inv_sdot, ca.DM(w_node))
+        lap = trapezoid_lap_time(inv_sdot, grid)
         delta = W[rows["DELTA"], :] * _SCALE[rows["DELTA"]]
         dd = delta[:, nxt] - delta
         reg = ca.sum2(dd**2 / h)
         self.t_ref = float(grid.length / 20.0)
         obj = (lap + st.w_ddelta * reg) / self.t_ref
         nlp = {"x": ca.vec(W), "f": obj, "g": ca.vertcat(*g_list)}
-        ipopt = {
-            "print_level": st.print_level,
-            "max_iter": st.max_iter,
-            "tol": st.tol,
-            "hessian_approximation": "exact",
-            "mu_strategy": "adaptive",
-            "sb": "yes",
-        }
-        ipopt.update(dict(st.ipopt_options))
-        self.solver = ca.nlpsol("time_optimal", "ipopt", nlp, {"ipopt": ipopt, "print_time": False})
+        self.solver = ipopt_solver("time_optimal", nlp, st)
         self.lbg = np.concatenate(lbg)
         self.ubg = np.concatenate(ubg)
         self.lap_fn = ca.Function("lap", [ca.vec(W)], [lap, 1.0 / inv_sdot])
@@ -398,6 +388,39 @@ def _initial_guess(
         raise PlanningError(f"unknown start {start!r}: pass 'warm', 'cold' or a CurvatureResult.")
     z[rows["VX"]] = np.maximum(z[rows["VX"]], 1.0)
     return z, kind
+
+
+def trapezoid_lap_time(inv_sdot: Any, grid: Any) -> Any:
+    """Lap time (s) from the nodes' 1/s_dot (s/m), by the trapezoid rule on the periodic grid.
+
+    Each node's weight is half of the two intervals (m) it touches, so the sum runs once round
+    the lap. Shared with :mod:`racing_lib.planning.best_lap`.
+    """
+    import casadi as ca
+
+    w_node = 0.5 * (grid.ds + np.roll(grid.ds, 1))
+    return ca.mtimes(inv_sdot, ca.DM(w_node))
+
+
+def ipopt_solver(name: str, nlp: dict[str, Any], st: Any) -> Any:
+    """CasADi's IPOPT ``nlpsol`` for ``nlp`` with the planners' options.
+
+    The exact Hessian (CasADi differentiates the model symbolically, so it costs little) and the
+    adaptive barrier update; ``st`` supplies ``print_level``, ``max_iter``, ``tol`` and any
+    ``ipopt_options`` that override these. Shared with :mod:`racing_lib.planning.best_lap`.
+    """
+    import casadi as ca
+
+    ipopt = {
+        "print_level": st.print_level,
+        "max_iter": st.max_iter,
+        "tol": st.tol,
+        "hessian_approximation": "exact",
+        "mu_strategy": "adaptive",
+        "sb": "yes",
+    }
+    ipopt.update(dict(st.ipopt_options))
+    return ca.nlpsol(name, "ipopt", nlp, {"ipopt": ipopt, "print_time": False})
 
 
 def solve_time_optimal(
