@@ -486,7 +486,7 @@ def test_compiled_linearization_equals_the_interpreted_one(setups):
 
 
 def test_compiled_code_goes_to_one_private_directory_shared_by_processes(tmp_path):
-    """Hundreds of controllers (a tuning run) must not leave hundreds of temporary directories."""
+    """Every process (test run, kernel, tuning worker) must not leave a directory behind."""
     import stat
     import subprocess
     import sys

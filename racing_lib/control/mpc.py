@@ -367,7 +367,6 @@ def _substep_linearization(
     return ca.Function("lin_rk4_substeps", *args)
 
 
-@functools.lru_cache(maxsize=1)
 @functools.cache
 def _jit_dir() -> str:
     """The directory for compiled CasADi code: one per user, reused by every process.
@@ -375,8 +374,9 @@ def _jit_dir() -> str:
     CasADi removes its files when a Function is destroyed (late in interpreter shutdown, so the
     directory itself cannot be removed then), and ``jit_temp_suffix`` keeps the names of
     concurrent processes apart. One shared directory therefore stays empty between runs, where a
-    fresh directory per controller would leave hundreds behind after a tuning run. If the name is
-    taken by something that is not our own private directory, a fresh one is used instead.
+    fresh directory per process would leave one behind for every test run, notebook kernel and
+    tuning worker. If the name is taken by something that is not our own private directory, a
+    fresh one is used instead.
     """
     import os
     import stat
