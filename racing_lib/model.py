@@ -40,7 +40,11 @@ Term by term (time domain, ``xi_dot = g(xi, u; kappa, theta)``):
   We use the lateral acceleration of the centre of gravity, ``a_y = v_y_dot + r v_x``, where the
   paper writes ``V_y_dot``: in steady cornering ``V_y_dot = 0`` and the literal reading would
   transfer no load at all. (The paper's ``F_zRL = (F_zf - Delta W_R)/2`` is a typo for ``F_zr``;
-  the rear split does not change the dynamics either way.)
+  the rear split does not change the dynamics either way.) This model keeps the paper's form
+  ``F_zFL = (F_zf - Delta W_F)/2`` as printed, which moves only half the load a roll-moment
+  balance needs (``Delta W_F/2`` per wheel instead of ``Delta W_F``); with tyres proportional to
+  the load it only scales the small yaw term above. The simulated car uses the physical loads
+  (:func:`racing_lib.vehicle.wheel_loads`), where load-sensitive tyres make the difference matter.
 
 The algebraic loop of Eq. 5 and 12-13
 -------------------------------------
@@ -571,6 +575,21 @@ class ModelParams:
         return (
             math.tan(math.pi / (2.0 * self.C_f)) / self.B_f,
             math.tan(math.pi / (2.0 * self.C_r)) / self.B_r,
+        )
+
+    def slip_angle_at(self, share: float) -> tuple[float, float]:
+        """Slip angles (rad) where the front and rear forces reach ``share`` of their peak.
+
+        On the rising side of ``sin(C arctan(B alpha))``: ``tan(arcsin(share) / C) / B``;
+        ``share = 1`` gives :meth:`peak_slip_angle`. A broad tyre curve (``C`` near 1) reaches
+        95 % of its peak at about half the peak's slip angle.
+        """
+        if not 0.0 < share <= 1.0:
+            raise ModelError(f"share must be in (0, 1], got {share!r}.")
+        lift = math.asin(share)
+        return (
+            math.tan(lift / self.C_f) / self.B_f,
+            math.tan(lift / self.C_r) / self.B_r,
         )
 
     def peak_acceleration(self) -> float:

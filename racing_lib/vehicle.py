@@ -400,9 +400,11 @@ def lateral_load_transfer(
     """Lateral load transfer per axle (paper Eq. 13, Appendix A), N.
 
     Delta W_F = m a_y h_c / l_t * l_r / L and Delta W_R = m a_y h_c / l_t * l_f / L, L = l_f + l_r:
-    the roll moment is shared between the axles like the static weight. The paper writes dV_y/dt
-    for a_y; physically it is the lateral acceleration of the CoG, dV_y/dt + r V_x, which is what
-    the simulator passes. Positive `a_y` (left turn) loads the right wheels.
+    the roll moment is shared between the axles like the static weight. Delta W is the load one
+    wheel of the axle gains and the other loses, so the roll moment of the wheel loads,
+    (Delta W_F + Delta W_R) l_t, balances m a_y h_c. The paper writes dV_y/dt for a_y; physically
+    it is the lateral acceleration of the CoG, dV_y/dt + r V_x, which is what the simulator passes.
+    Positive `a_y` (left turn) loads the right wheels.
 
     Returns
     -------
@@ -417,8 +419,12 @@ def wheel_loads(
 ) -> tuple[Any, Any, Any, Any]:
     """Vertical loads of the four wheels with longitudinal and lateral load transfer, N.
 
-    Corrects the paper's Eq. 13 misprint (the rear wheels share F_zr, not F_zf) and clamps each load
-    at zero (a lifted wheel carries nothing).
+    Each wheel carries half its axle's load plus or minus the whole transfer of its axle, so the
+    loads balance the pitch moment ``m a_x h_c`` and the roll moment ``m a_y h_c``. This corrects
+    two slips of the paper's Eq. 15: the rear wheels share F_zr, not F_zf, and the paper's
+    ``F_zFL = (F_zf - Delta W_F) / 2`` halves the transfer as well, which leaves the wheel loads
+    reacting only half the roll moment. Each load is clamped at zero (a lifted wheel carries
+    nothing).
 
     Parameters
     ----------
@@ -438,10 +444,10 @@ def wheel_loads(
     f_zf = f_zf - dw
     f_zr = f_zr + dw
     return (
-        ops.fmax(0.5 * (f_zf - dw_f), 0.0),
-        ops.fmax(0.5 * (f_zf + dw_f), 0.0),
-        ops.fmax(0.5 * (f_zr - dw_r), 0.0),
-        ops.fmax(0.5 * (f_zr + dw_r), 0.0),
+        ops.fmax(0.5 * f_zf - dw_f, 0.0),
+        ops.fmax(0.5 * f_zf + dw_f, 0.0),
+        ops.fmax(0.5 * f_zr - dw_r, 0.0),
+        ops.fmax(0.5 * f_zr + dw_r, 0.0),
     )
 
 

@@ -92,6 +92,21 @@ def test_load_transfer_conserves_load_and_moves_it_the_right_way():
     np.testing.assert_allclose(np.asarray(f(3.0)).ravel(), [fl, fr, rl, rr], rtol=1e-12)
 
 
+@pytest.mark.parametrize(("a_x", "a_y"), [(0.0, 9.7), (-6.0, -5.0), (3.0, 5.0), (0.0, 0.0)])
+def test_wheel_loads_balance_the_pitch_and_roll_moments(a_x, a_y):
+    # An independent truth: the wheel loads alone must hold the car against the inertial moments
+    # of its centre of gravity, m a_x h_c in pitch and m a_y h_c in roll (wheels at x = l_f or
+    # -l_r, y = +-l_t/2, left positive). The paper's Eq. 15 as printed reacts half the roll moment.
+    fl, fr, rl, rr = wheel_loads(P, a_x, a_y)
+    assert min(fl, fr, rl, rr) > 0.0  # no wheel lifts at these accelerations
+    assert fl + fr + rl + rr == pytest.approx(P.m * P.g)
+    half_t = 0.5 * P.l_t
+    roll = half_t * (fl + rl) - half_t * (fr + rr)
+    assert roll == pytest.approx(-P.m * a_y * P.h_c, abs=1e-6)
+    pitch = P.l_f * (fl + fr) - P.l_r * (rl + rr)
+    assert pitch == pytest.approx(-P.m * a_x * P.h_c, abs=1e-6)
+
+
 def test_engine_curve_power_limit_and_backends():
     rpms = np.linspace(500.0, 6000.0, 45)
     floats = np.array([engine_torque(P, float(r)) for r in rpms])
