@@ -138,17 +138,19 @@ MANOEUVRES: dict[str, str] = {
 #: friction between longitudinal and lateral force, which the planning model's do not; its nominal
 #: ``B, C, D`` are therefore not exactly the best planning-model fit, and the individual ``B`` and
 #: ``C`` trade against each other (so only the peak ``mu D`` and the cornering stiffness
-#: ``mu F_z0 B C D`` are toleranced). Observed over seeds 1-4, full and fast data, with the car's
-#: actuation noise: drag and rolling resistance within 0.1 %; front peak -1.5 to -8.5 %; rear peak
-#: -6 to -9 % (the understeering car never takes its rear tyres to the peak in steady state, so the
-#: rear peak is extrapolated); cornering stiffnesses within 5 %; ``I_zz`` -2.5 to -5.5 %; steering
-#: lag within 3 %.
+#: ``mu F_z0 B C D`` are toleranced). The fitted peak is the *axle's* effective one: in a fast
+#: corner the inner wheel carries little load and the load-sensitive tyres lose grip to the
+#: transfer, so it lies below the single tyre's ``mu D``. Observed over seeds 1-4 and 7, full and
+#: fast data, with the car's actuation noise: drag and rolling resistance within 0.1 %; front peak
+#: -15.6 to -16.3 %; rear peak -15.7 to -17.6 % (``C`` at its lower bound of 1.2, see
+#: ``_fit_axle``); cornering stiffnesses within 6 %; ``I_zz`` -3 to -5.5 %; steering lag within
+#: 1.5 %.
 TOLERANCES: dict[str, float] = {
     "C_xw": 0.10,
     "c_rr": 0.25,
     "I_zz": 0.15,
-    "mu*D_f": 0.10,
-    "mu*D_r": 0.15,
+    "mu*D_f": 0.20,
+    "mu*D_r": 0.22,
     "C_alpha_f": 0.20,
     "C_alpha_r": 0.20,
 }
@@ -814,13 +816,20 @@ def _jac_condition(jac: Any) -> float:
 
 
 def _fit_axle(alpha: np.ndarray, phi: np.ndarray, mu: float) -> tuple[np.ndarray, Any]:
-    """Pacejka B, C, D of one axle from force per unit load ``phi`` at slip ``alpha``."""
+    """Pacejka B, C, D of one axle from force per unit load ``phi`` at slip ``alpha``.
+
+    ``C`` is kept at or above 1.2 so that the fitted curve has a force peak (at
+    ``tan(pi / (2 C)) / B``), which the planner and the MPC use as their slip bound. The simulated
+    car's axles are broad (the inner wheel, nearly unloaded in a fast corner, peaks early, the
+    outer one late), and with ``C`` free the fit drifts to ``C ~ 1``, a curve without a peak, for
+    an RMS residual only about 1 % smaller.
+    """
     best = None
     for C0 in (1.3, 1.9):
         res = least_squares(
             lambda p: pacejka_lateral(alpha, 1.0, mu, p[0], p[1], p[2]) - phi,
             x0=[10.0, C0, 1.0],
-            bounds=([1.0, 0.5, 0.2], [60.0, 1.99, 3.0]),
+            bounds=([1.0, 1.2, 0.2], [60.0, 1.99, 3.0]),
             x_scale=[10.0, 1.0, 1.0],
         )
         if best is None or res.cost < best.cost:
