@@ -151,8 +151,9 @@ def speed_profile(
     kappa : array_like, shape (N,)
         Curvature of the path at the nodes, 1/m.
     params : ModelParams, optional
-        Planning parameters; read: ``mu``, ``m`` (kg), ``C_xw`` (kg/m), ``c_rr`` (-),
-        ``v_top``/``v_max`` (m/s). Defaults: the paper's Demio (mu 1.25, m 1355.2, C_xw 0.1302).
+        Planning parameters; read: ``mu``, ``D_f``, ``D_r`` (the friction circle's radius is
+        ``mu min(D_f, D_r) g``), ``m`` (kg), ``C_xw`` (kg/m), ``c_rr`` (-), ``v_top``/``v_max``
+        (m/s). Defaults: the paper's Demio (mu 1.25, D 1, m 1355.2, C_xw 0.1302).
     pedal_map : PedalMap or callable, optional
         Tire acceleration limits a_x in [a_min(v), a_max(v)], m/s^2 (see
         :func:`pedal_accel_limits`); default ``params.pedal``. Without any, the tires' friction
@@ -235,7 +236,12 @@ def speed_profile(
     g_eff = G * np.cos(theta) + a_z  # vertical acceleration pressing the car onto the road, m/s^2
     if np.any(g_eff <= 0):
         raise PlanningError("the road's grade or vertical acceleration lifts the car off the road.")
-    grip = mu * g_eff  # friction-circle radius, m/s^2
+    # The tyres' peak: mu D with the smaller Pacejka peak factor of the two axles (the identified
+    # D is below 1 where the car's load-sensitive tyres lose grip to load transfer). Planning
+    # with mu g alone asked the car for 12.3 m/s^2 where it had 10.3 and slid wide when braking
+    # into corners.
+    d_peak = min(_param(params, ("D_f",), 1.0), _param(params, ("D_r",), 1.0))
+    grip = mu * d_peak * g_eff  # friction-circle radius, m/s^2
     abs_k = np.abs(kappa)
     with np.errstate(divide="ignore"):
         v_max = np.where(abs_k > 1e-9, np.sqrt(grip / np.maximum(abs_k, 1e-12)), np.inf)

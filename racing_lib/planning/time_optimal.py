@@ -16,14 +16,17 @@ Formulation choices, from the measurements in MEASURED.md:
   time (within 0.002 s); probably because the warm start sits on many active constraints (track
   edges, tire peaks), where an interior-point method starts badly (a lower ``mu_init`` did not
   help).
-* **Tires below their peak**: |alpha_f|, |alpha_r| <= the slip angle of the Pacejka peak
-  (:meth:`racing_lib.model.ModelParams.peak_slip_angle`). Past the peak the optimum is degenerate
-  and IPOPT needs several times more iterations.
+* **Tires below their peak**: |alpha_f|, |alpha_r| <= the slip angle where the Pacejka force
+  reaches 95 % of its peak (``slip_force_share``,
+  :meth:`racing_lib.model.ModelParams.slip_angle_at`). Past the peak the optimum is degenerate
+  and IPOPT needs several times more iterations; up to the peak itself, plans drifted into
+  corners under braking, which the car cannot do.
 * **Everything scaled to order one**: each variable is divided by a typical magnitude and each
   dynamics defect by the scale of its state; the objective by a reference lap time.
 * **Exact Hessian** (CasADi's algorithmic differentiation of an SX graph).
-* **Combined slip**: the tire acceleration a_x and the lateral acceleration a_y share the friction
-  ellipse ``(a_x / a_brake)^2 + (a_y / a_peak)^2 <= 1`` (``friction_ellipse``; ``a_peak`` is the
+* **Combined slip**: the tires' longitudinal acceleration ``a_x - F_yf sin(delta) / m`` and the
+  lateral acceleration a_y share the friction ellipse ``(a_long / a_brake)^2 + (a_y / a_peak)^2
+  <= 1`` (``friction_ellipse``; ``a_peak`` is the
   tyres' peak, :meth:`racing_lib.model.ModelParams.peak_acceleration`, ``a_brake`` the pedal
   map's full brake, both identified: the g-g diagram); the model's lateral tire forces do not know
   about braking, the simulated car's tires do. The rear tyres also carry the drive force inside
@@ -96,7 +99,14 @@ class TimeOptimalSettings:
     e_psi_max : float
         Bound on the heading error to the centerline, rad.
     slip_limit : bool
-        Bound the slip angles by the Pacejka peak.
+        Bound the slip angles on the rising side of the tyre curves (below the Pacejka peak).
+    slip_force_share : float
+        The bound is the slip angle where the tyre force reaches this share of its peak
+        (:meth:`racing_lib.model.ModelParams.slip_angle_at`; 1 = the peak itself). The identified
+        curves are broad (C about 1.2): at the peak the rear slips 7.7 degrees, and plans used
+        it to rotate the car into corners while braking at the limit, a drift the car's tyres,
+        which lose lateral grip when they brake, cannot hold (Oschersleben: 32 s off the track).
+        95 % of the peak force comes at about half that slip.
     friction_ellipse : bool
         Couple a_x and a_y through the friction ellipse.
     drive_axle_circle : bool
@@ -135,6 +145,7 @@ class TimeOptimalSettings:
     v_min: float = 3.0
     e_psi_max: float = 1.0
     slip_limit: bool = True
+    slip_force_share: float = 0.95
     friction_ellipse: bool = True
     drive_axle_circle: bool = True
     pedal_limits: str = "exact"
@@ -227,14 +238,18 @@ class _Problem:
         terms = dict(zip(terms_fn.name_out(), terms_fn(xi, u, kap_k, th_k), strict=True))
         path, lb_path, ub_path = [], [], []
         if st.slip_limit:
-            a_f, a_r = params.peak_slip_angle()
+            a_f, a_r = params.slip_angle_at(st.slip_force_share)
             path += [terms["alpha_f"] / a_f, terms["alpha_r"] / a_r]
             lb_path += [-1.0, -1.0]
             ub_path += [1.0, 1.0]
         if st.friction_ellipse:
             grip = params.peak_acceleration()
             grip_x = min(grip, params.pedal.full_brake())  # the g-g diagram's braking axis
-            path.append((z[rows["AX"]] / grip_x) ** 2 + (terms["a_y"] / grip) ** 2)
+            # The tyres' whole longitudinal force, a_x less the steered front tyre's lateral force
+            # along the car (Eq. 5): with a_x alone in the ellipse the optimum braked beyond it by
+            # scrubbing, a steering zig-zag in the braking zones that the car cannot follow.
+            a_long = z[rows["AX"]] - terms["F_yf"] * ca.sin(u[int(U.DELTA)]) / params.m
+            path.append((a_long / grip_x) ** 2 + (terms["a_y"] / grip) ** 2)
             lb_path.append(-np.inf)
             ub_path.append(1.0)
         if st.drive_axle_circle:
