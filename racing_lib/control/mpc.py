@@ -522,9 +522,8 @@ def _edge_band(plan: Any, track: Any, car_width: float, margin: float) -> tuple:
     """
     x = np.asarray(plan.x, dtype=float)
     y = np.asarray(plan.y, dtype=float)
-    s_c, e_c, _ = track.centerline.to_frenet(x, y)
-    s_c = np.asarray(s_c, dtype=float)
-    e_c = np.asarray(e_c, dtype=float)
+    # Along the plan, so that every node stays on its own stretch where the track crosses itself.
+    s_c, e_c = track.centerline.to_frenet_along(x, y)
     inset = 0.5 * car_width + margin
     band_max = np.asarray(track.width_left(s_c), dtype=float) - e_c - inset
     band_min = -(np.asarray(track.width_right(s_c), dtype=float) + e_c - inset)
@@ -607,6 +606,8 @@ class _MPCBase:
             )
             self._lin_map = lin.map(N)
         self._counters = {"qp_failures": 0, "fallback_shifted": 0, "fallback_brake": 0}
+        self._rescues_at_reset = 0
+        self._qp_list: list[TrackingQP] = []  # the QPs solved each period (set by subclasses)
         self._statuses: dict[str, int] = {}
         # Wall time (s) of the parts of the last step: project (nearest point), reference,
         # linearize, build (bounds and QP data), qp (solve), pedal (command), total.
@@ -622,6 +623,7 @@ class _MPCBase:
         self._tracker.project(obs.x, obs.y)
         for key in self._counters:
             self._counters[key] = 0
+        self._rescues_at_reset = sum(qp.rescues for qp in self._qp_list)
         self._statuses.clear()
         self._shift_buffer: list[np.ndarray] = []
         self.last_solution = None
@@ -633,8 +635,12 @@ class _MPCBase:
         self._delta_est = float(self._u_prev[U.DELTA])
 
     def stats(self) -> dict[str, float]:
-        """Counters of the lap: ``qp_failures``, ``fallback_shifted``, ``fallback_brake``."""
-        return {k: float(v) for k, v in self._counters.items()}
+        """Counters of the lap: ``qp_failures``, ``fallback_shifted``, ``fallback_brake`` and
+        ``qp_rescues`` (QPs that OSQP failed and Clarabel was asked to solve; those it solved too
+        are not failures)."""
+        out = {k: float(v) for k, v in self._counters.items()}
+        out["qp_rescues"] = float(sum(qp.rescues for qp in self._qp_list) - self._rescues_at_reset)
+        return out
 
     # --- pieces ----------------------------------------------------------------------------------
     def current_state(self, obs: Any) -> np.ndarray:
@@ -847,7 +853,7 @@ class CoupledMPC(_MPCBase):
     >>> bool(-1.0 <= cmd.pedal <= 1.0 and abs(cmd.steer) <= mpc.settings.steer_max)
     True
     >>> mpc.stats()
-    {'qp_failures': 0.0, 'fallback_shifted': 0.0, 'fallback_brake': 0.0}
+    {'qp_failures': 0.0, 'fallback_shifted': 0.0, 'fallback_brake': 0.0, 'qp_rescues': 0.0}
 
     A whole lap: ``racing_lib.experiment.run_lap(car, mpc, plan, track=track, seed=0)``.
     """
@@ -869,6 +875,7 @@ class CoupledMPC(_MPCBase):
             slack_quadratic=st.slack_quadratic,
         )
         self.qp = TrackingQP(shape, st.qp)
+        self._qp_list = [self.qp]
         self._lam_used = self._lam if st.smooth_transition else np.zeros_like(self._lam)
         self._shift_buffer = []
 
@@ -911,13 +918,17 @@ class CoupledMPC(_MPCBase):
         u_hat = u_ref + self._lam_used[:, None] * (self._u_prev - u_ref[0])[None, :]
         kappa = rows[:N, _PlanTable.KAPPA]
         theta = rows[:N, _PlanTable.THETA]
-        t2 = time.perf_counter()
-        A, B, d = self.linearize(xi_hat[:N], u_hat[:N], kappa, theta)
-        t3 = time.perf_counter()
         # State-dependent a_x limits at the heuristic states, stages 0..N-1.
         a_min, a_max = self.ax_limits(xi_hat[:N])
         u_min = np.column_stack([np.full(N, -st.steer_max), a_min])
         u_max = np.column_stack([np.full(N, st.steer_max), a_max])
+        # Linearize only at inputs the QP may choose: after a hard brake (or a fallback) the last
+        # a_x can lie far outside this step's bounds, and the tyre slopes there made the
+        # prediction unstable enough for OSQP to report the QP infeasible.
+        u_lin = np.clip(u_hat[:N], u_min, u_max)
+        t2 = time.perf_counter()
+        A, B, d = self.linearize(xi_hat[:N], u_lin, kappa, theta)
+        t3 = time.perf_counter()
         idx = _COUPLED_STATES
         A_q, B_q, d_q = augment_steering_lag(
             A[:, idx[:, None], idx[None, :]], B[:, idx, :], d[:, idx], U.DELTA, st.steer_tau, st.dt
@@ -980,6 +991,7 @@ class DecoupledMPC(_MPCBase):
             ),
             st.qp,
         )
+        self._qp_list = [self.qp_lon, self.qp_lat]
         self._shift_buffer = []
 
     def step(self, obs: Any) -> Command:
