@@ -529,7 +529,7 @@ def _closed_loop_profile(log: Any, track: Track) -> dict[str, list[float | None]
 
 def _plan_profile(trajectory: Trajectory, track: Track) -> dict[str, list[float | None]]:
     """The plan on the track-centerline grid (every :data:`PROFILE_SPACING` m)."""
-    s, n, _ = track.centerline.to_frenet(trajectory.x, trajectory.y)
+    s, n = track.centerline.to_frenet_along(trajectory.x, trajectory.y)
     values = {"vx": trajectory.vx, "kappa": trajectory.kappa, "delta": trajectory.delta, "n": n}
     prof = _periodic_profile(s, values, _profile_grid(track), float(track.length), math.inf)
     return {

@@ -224,6 +224,60 @@ def _self_intersections(xy: np.ndarray) -> list[tuple[int, int]]:
     return sorted(zip(i[hit].tolist(), j[hit].tolist(), strict=True))
 
 
+#: A crossing of the centerline is a bridge (a figure-eight layout) when the two stretches that
+#: meet are at least this far apart along the lap, m ...
+BRIDGE_MIN_SEPARATION = 100.0
+#: ... and cross at an angle of at least this many degrees: a broken file (swapped or misplaced
+#: rows) makes a small loop between neighbouring rows or grazing stretches instead.
+BRIDGE_MIN_ANGLE_DEG = 20.0
+
+
+@dataclass(frozen=True)
+class Crossing:
+    """Where a closed curve crosses itself.
+
+    Attributes
+    ----------
+    s_a, s_b : float
+        Arc lengths of the two stretches that cross, m (s_a < s_b).
+    angle_deg : float
+        Angle between their directions, degrees (0-90).
+    segment_a, segment_b : int
+        Indices of the two crossing segments of the polyline tested (vertex k to k + 1).
+    """
+
+    s_a: float
+    s_b: float
+    angle_deg: float
+    segment_a: int
+    segment_b: int
+
+    def is_bridge(self, length: float) -> bool:
+        """True for a real crossing (two far-apart stretches of the lap at a sizeable angle)."""
+        gap = abs(self.s_a - self.s_b)
+        gap = min(gap, length - gap)
+        return gap >= BRIDGE_MIN_SEPARATION and self.angle_deg >= BRIDGE_MIN_ANGLE_DEG
+
+
+def _crossings(xy: np.ndarray, s: np.ndarray) -> list[Crossing]:
+    """The crossings of the closed polyline ``xy`` (n, 2), vertices at arc lengths ``s`` (m)."""
+    nxt = np.roll(xy, -1, axis=0)
+    out = []
+    for i, j in _self_intersections(xy):
+        da, db = nxt[i] - xy[i], nxt[j] - xy[j]
+        cos = abs(float(np.dot(da, db))) / (float(np.hypot(*da) * np.hypot(*db)) + 1e-300)
+        angle = math.degrees(math.acos(min(1.0, cos)))
+        out.append(Crossing(float(s[i]), float(s[j]), angle, int(i), int(j)))
+    return out
+
+
+def _refuse_broken_crossing(crossings: list[Crossing], length: float, describe) -> None:
+    """Raise TrackError for the first crossing that is not a bridge (``describe(c)`` words it)."""
+    for c in crossings:
+        if not c.is_bridge(length):
+            raise TrackError(describe(c))
+
+
 class Path:
     """A closed C2 curve parametrized by arc length s (m).
 
@@ -239,17 +293,22 @@ class Path:
     resolution : float, optional
         Target knot spacing of the arc-length spline, m.
     check : bool, optional
-        Refuse a self-intersecting curve (default True).
+        Refuse a curve that crosses itself (default True), unless the crossing is a bridge: two
+        stretches at least :data:`BRIDGE_MIN_SEPARATION` apart along the loop, meeting at
+        :data:`BRIDGE_MIN_ANGLE_DEG` or more, as in a figure-eight circuit.
 
     Attributes
     ----------
     length : float
         Total arc length, m.
+    crossings : list of Crossing
+        The bridges of the curve (empty for a simple loop).
 
     Raises
     ------
     TrackError
-        Too few points, NaN/inf, repeated consecutive points, or a self-intersecting curve.
+        Too few points, NaN/inf, repeated consecutive points, or a curve that crosses itself other
+        than at a bridge.
 
     Examples
     --------
@@ -302,16 +361,20 @@ class Path:
         self._init_knots(resampled)
         #: Arc length of each input point on the final path, m.
         self.s_input = self._knots.s[np.concatenate([[0], np.cumsum(parts)[:-1]])].copy()
+        self.crossings = _crossings(self._knots_xy, self._knots.s) if check else []
         if check:
-            crossings = _self_intersections(self._knots_xy)
-            if crossings:
-                i, j = crossings[0]
-                si, sj = self._knots.s[i], self._knots.s[j]
-                raise TrackError(
-                    f"The path crosses itself near s = {si:.1f} m and s = {sj:.1f} m "
-                    f"(x = {self._knots_xy[i, 0]:.1f}, y = {self._knots_xy[i, 1]:.1f}); fix the "
-                    "points so the loop does not cross."
+
+            def describe(c: Crossing) -> str:
+                x, y = self.position(c.s_a)
+                return (
+                    f"The path crosses itself near s = {c.s_a:.1f} m and s = {c.s_b:.1f} m "
+                    f"(x = {float(x):.1f}, y = {float(y):.1f}) at {c.angle_deg:.0f} degrees; fix "
+                    "the points so the loop does not cross (only two stretches at least "
+                    f"{BRIDGE_MIN_SEPARATION:.0f} m apart along the lap may cross, at "
+                    f"{BRIDGE_MIN_ANGLE_DEG:.0f} degrees or more, as on a bridge)."
                 )
+
+            _refuse_broken_crossing(self.crossings, self.length, describe)
 
     def _init_knots(self, knots_xy: np.ndarray) -> None:
         """Fit the final spline with its knots at its own arc length."""
@@ -426,6 +489,54 @@ class Path:
             self._kdtree = cKDTree(self._knots_xy)
         _, k = self._kdtree.query(np.column_stack([x, y]))
         return self._knots.s[k]
+
+    def _nearest_knot_near(self, x: float, y: float, s0: float, window: float) -> float:
+        """Arc length of the knot nearest (x, y) among those within ``window`` of ``s0``, m.
+
+        The local search of a point that moves along the path: where the path crosses itself
+        (a bridge), the globally nearest knot may lie on the other branch.
+        """
+        knots = self._knots.s[:-1]
+        n = len(knots)
+        lo = int(np.searchsorted(knots, s0 - window))
+        hi = int(np.searchsorted(knots, s0 + window, side="right"))
+        if s0 - window < 0.0:
+            lo -= n - int(np.searchsorted(knots, s0 - window + self.length))
+        if s0 + window >= self.length:
+            hi += int(np.searchsorted(knots, s0 + window - self.length, side="right"))
+        idx = np.arange(lo, max(hi, lo + 1)) % n
+        d2 = (self._knots_xy[idx, 0] - x) ** 2 + (self._knots_xy[idx, 1] - y) ** 2
+        return float(knots[idx[int(np.argmin(d2))]])
+
+    def to_frenet_along(self, x: ArrayLike, y: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+        """Frenet (s, e_y) of points that follow one another along the path (a line, a log).
+
+        Each point is projected near its predecessor (:class:`FrenetTracker`), so where the path
+        crosses itself every point stays on the branch it is on; :meth:`to_frenet` takes the
+        nearest branch.
+
+        Parameters
+        ----------
+        x, y : array_like, shape (n,)
+            Positions in order of travel, m.
+
+        Returns
+        -------
+        s, e_y : ndarray, shape (n,)
+            Arc length (m, in [0, length)) and signed offset (m, positive left).
+        """
+        xa = np.asarray(x, dtype=float).ravel()
+        ya = np.asarray(y, dtype=float).ravel()
+        if xa.shape != ya.shape:
+            raise TrackError(
+                f"to_frenet_along needs as many x as y values, got {xa.size} and {ya.size}."
+            )
+        tracker = FrenetTracker(self)
+        s = np.empty(xa.size)
+        e_y = np.empty(xa.size)
+        for k in range(xa.size):
+            s[k], e_y[k] = tracker.project(xa[k], ya[k])
+        return s, e_y
 
     def _newton(self, x: np.ndarray, y: np.ndarray, s: np.ndarray, iters: int = 30) -> np.ndarray:
         """Refine s to the foot point of (x, y): solve (r(s) - p) . r'(s) = 0 by Newton.
@@ -605,8 +716,10 @@ class FrenetTracker:
 
     The first call (or the first after :meth:`reset`) searches the whole path; later calls start
     Newton's method at the previous s, so a call costs a few microseconds of scalar arithmetic.
-    If the point has jumped far from where it was (a teleport, a new lap set-up), it falls back to
-    the global search.
+    When Newton's method fails or jumps, the nearest point within ``max_jump`` of the previous s
+    decides, so that where the path crosses itself (a bridge) the point stays on its branch. Only
+    a point farther than ``max_jump`` from that stretch (a teleport, a new lap set-up) falls back
+    to the global search.
 
     Parameters
     ----------
@@ -656,7 +769,10 @@ class FrenetTracker:
         jump = abs(s - s0)
         jump = min(jump, self._length - jump)
         if not ok or jump > self.max_jump:
-            s, e_y, _ = self.path.to_frenet(x, y)
+            s_near = self.path._nearest_knot_near(x, y, s0, self.max_jump)
+            s, e_y, _ = self.path.to_frenet(x, y, s_hint=s_near)
+            if abs(e_y) > self.max_jump:
+                s, e_y, _ = self.path.to_frenet(x, y)
         self._s = s
         return s, e_y
 
@@ -923,14 +1039,21 @@ class Track:
                 f"{spacing:.1f} m apart. The loop must be closed: the file lists one lap and the "
                 "last point is joined to the first, so add the missing points up to the start."
             )
-        crossings = _self_intersections(xy)
-        if crossings:
-            i, j = crossings[0]
-            raise TrackError(
+        s_rows = np.concatenate([[0.0], np.cumsum(step)])
+        loop_length = float(s_rows[-1] + gap)
+
+        def describe(c: Crossing) -> str:
+            i, j = c.segment_a, c.segment_b
+            return (
                 f"{where}: the centerline crosses itself between lines {lines[i]}-"
-                f"{lines[(i + 1) % len(lines)]} and {lines[j]}-{lines[(j + 1) % len(lines)]}; "
-                "a track must be a simple closed loop: fix the points there."
+                f"{lines[(i + 1) % len(lines)]} and {lines[j]}-{lines[(j + 1) % len(lines)]} "
+                f"at {c.angle_deg:.0f} degrees; a track must be a closed loop that crosses itself "
+                f"only at bridges (two stretches at least {BRIDGE_MIN_SEPARATION:.0f} m apart "
+                f"along the lap, at {BRIDGE_MIN_ANGLE_DEG:.0f} degrees or more): fix the points "
+                "there."
             )
+
+        _refuse_broken_crossing(_crossings(xy, s_rows), loop_length, describe)
         try:
             centerline = Path(xy[:, 0], xy[:, 1])
         except TrackError as err:

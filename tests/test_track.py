@@ -412,15 +412,55 @@ def test_coincident_points(tmp_path):
         Track.from_csv(write_csv(tmp_path / "touch.csv", rows))
 
 
-def test_self_intersecting(tmp_path):
+def test_a_figure_eight_with_a_bridge_loads(tmp_path):
+    # A lemniscate: the two stretches through the origin are half a lap apart and cross at 53
+    # degrees, a bridge as on a real figure-eight circuit.
     t = np.linspace(0.0, 2.0 * np.pi, 200, endpoint=False) + 0.01
-    x, y = 200.0 * np.sin(t), 100.0 * np.sin(t) * np.cos(t)  # figure eight, no shared point
+    x, y = 200.0 * np.sin(t), 100.0 * np.sin(t) * np.cos(t)
     rows = [[a, b, 4.0, 4.0] for a, b in zip(x, y, strict=True)]
+    track = Track.from_csv(write_csv(tmp_path / "eight.csv", rows))
+    (crossing,) = track.centerline.crossings
+    assert crossing.angle_deg == pytest.approx(53.13, abs=0.5)
+    gap = crossing.s_b - crossing.s_a
+    assert gap == pytest.approx(0.5 * track.length, rel=0.02)
+    assert len(Path(x, y).crossings) == 1
+
+
+def test_a_crossing_that_is_no_bridge_is_refused(tmp_path):
+    # Two rows swapped: the line folds back over itself between neighbouring rows.
+    rows = ellipse_rows()
+    rows[30], rows[31] = rows[31], rows[30]
     with pytest.raises(TrackError, match="crosses itself between lines") as err:
-        Track.from_csv(write_csv(tmp_path / "eight.csv", rows))
-    assert "eight.csv" in str(err.value) and "simple closed loop" in str(err.value)
+        Track.from_csv(write_csv(tmp_path / "swapped.csv", rows))
+    assert "swapped.csv" in str(err.value) and "bridges" in str(err.value)
+    xy = np.array(rows)[:, :2]
     with pytest.raises(TrackError, match="crosses itself"):
-        Path(x, y)
+        Path(xy[:, 0], xy[:, 1])
+    # Far apart along the lap but grazing (6 degrees): a misplaced stretch, not a bridge.
+    t = np.linspace(0.0, 2.0 * np.pi, 200, endpoint=False) + 0.01
+    x, y = 200.0 * np.sin(t), 10.0 * np.sin(t) * np.cos(t)
+    rows = [[a, b, 2.0, 2.0] for a, b in zip(x, y, strict=True)]
+    with pytest.raises(TrackError, match="crosses itself.* at 6 degrees"):
+        Track.from_csv(write_csv(tmp_path / "grazing.csv", rows))
+
+
+def test_the_tracker_stays_on_its_branch_through_a_crossing():
+    from racing_lib.tracks import figure_eight_track
+
+    track = figure_eight_track()
+    path = track.centerline
+    (crossing,) = path.crossings
+    # A car driving along the second stretch through the crossing, 2 m left of the line: the
+    # nearest branch flips at the crossing, the tracker's answer must not.
+    s_true = crossing.s_b + np.linspace(-30.0, 30.0, 121)
+    x, y = path.position(s_true)
+    nx, ny = -np.sin(path.heading(s_true)), np.cos(path.heading(s_true))
+    s, e_y = path.to_frenet_along(x + 2.0 * nx, y + 2.0 * ny)
+    np.testing.assert_allclose(s, s_true, atol=1e-6)
+    np.testing.assert_allclose(e_y, 2.0, atol=1e-6)
+    # The nearest-point projection does jump to the other branch there.
+    s_global, _, _ = path.to_frenet(x + 2.0 * nx, y + 2.0 * ny)
+    assert np.max(np.abs(s_global - s_true)) > 100.0
 
 
 def test_open_centerline(tmp_path):

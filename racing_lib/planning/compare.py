@@ -109,7 +109,7 @@ def speed_profile_trajectory(
     s = np.asarray(path.sample(n=n), float)
     kappa = np.asarray(path.curvature(s), float)
     xs, ys = path.position(s)
-    s_center, _, _ = track.centerline.to_frenet(np.asarray(xs), np.asarray(ys))
+    s_center, _ = track.centerline.to_frenet_along(xs, ys)
     theta = np.asarray(track.grade(np.asarray(s_center, float)), float)
     prof = speed_profile(
         s, kappa, params, pedal_map, theta, v_top, options, length=float(path.length)
@@ -153,7 +153,7 @@ def line_lap_time(
 def _on_centerline(track: Any, traj: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Centerline arc length (unwrapped from the first node, increasing), e_y and t of the nodes."""
     x, y = _line_xy(traj)
-    s_c, e_y, _ = track.centerline.to_frenet(x, y)
+    s_c, e_y = track.centerline.to_frenet_along(x, y)
     s_c = np.unwrap(np.asarray(s_c, float), period=track.length)
     if s_c[-1] < s_c[0]:
         raise PlanningError(

@@ -34,6 +34,7 @@ __all__ = [
     "corner_positions",
     "crucial_corners",
     "expressway_track",
+    "figure_eight_track",
     "shortcut_track",
     "track_from_segments",
 ]
@@ -56,6 +57,43 @@ BUILTIN: dict[str, Callable[[], Track]] = {
     "expressway": expressway_track,
     "shortcut": shortcut_track,
 }
+
+
+def figure_eight_track(
+    radius: float = 60.0, width: float = 10.0, boundary: str = "walls", name: str = "figure-eight"
+) -> Track:
+    """A figure-eight circuit: two 270-degree lobes joined by straights that cross on a bridge.
+
+    From the crossing (s = 0) the lap runs a straight of length ``radius``, turns right by 270
+    degrees, crosses the start again at right angles along a straight of ``2 radius``, turns left
+    by 270 degrees and returns to the start: ``(4 + 3 pi) radius`` in all (805 m for 60 m). The
+    two stretches through the crossing are half a lap apart, so the centerline's crossing is a
+    bridge (see :class:`racing_lib.track.Path`), not a broken loop.
+
+    Parameters
+    ----------
+    radius : float
+        Radius of the lobes, m (also the length of the half straights).
+    width : float
+        Track width, m (half on each side of the centerline).
+    boundary : {'walls', 'open'}
+        Edge behaviour.
+    name : str
+        Track name.
+    """
+    return track_from_segments(
+        [
+            Straight(radius),
+            Arc.degrees(radius, -270.0),
+            Straight(2.0 * radius),
+            Arc.degrees(radius, 270.0),
+            Straight(radius),
+        ],
+        width=width,
+        boundary=boundary,
+        name=name,
+        transition=min(30.0, 0.5 * radius),
+    )
 
 
 def crucial_corners(track: Track | str) -> tuple[Corner, ...]:

@@ -7,9 +7,11 @@ the layout is exactly the sum of the arc angles. Heading and position are integr
 on a fine grid (exact heading: curvature is piecewise linear; positions by the trapezoid rule
 with steps of at most 0.1 m).
 
-Closing the loop. A closed track must turn by exactly +-360 degrees and end where it starts.
-* Heading: if the arc angles sum to 360 degrees within ``angle_tolerance``, every arc angle is
-  scaled by the same factor so that the sum is exact (arcs keep their radii).
+Closing the loop. A closed track must turn by exactly +-360 degrees (or by 0 degrees: a
+figure-eight, whose two lobes turn opposite ways) and end where it starts.
+* Heading: if the arc angles sum to +-360 (or 0) degrees within ``angle_tolerance``, every arc
+  angle is scaled by the same factor so that the sum is exact (arcs keep their radii); for a
+  figure-eight only the arcs of one turning direction are scaled.
 * Position: the remaining gap e = r(L) - r(0) is closed by lengthening or shortening the
   straights, which moves everything after a straight without turning it. The changes dL_i
   minimize sum (dL_i / L_i)^2 subject to sum dL_i (cos theta_i, sin theta_i) = -e (least squares,
@@ -219,22 +221,33 @@ def build_centerline(
     Raises
     ------
     TrackError
-        Bad segments, turning far from +-360 degrees, or closing corrections that would make a
-        straight shorter than its transitions.
+        Bad segments, turning far from +-360 (and from 0) degrees, or closing corrections that
+        would make a straight shorter than its transitions.
     """
     _check_segments(segments)
     if not transition >= 0:
         raise TrackError(f"Transition length must be >= 0 m, got {transition}.")
     segs = list(segments)
     turning = sum(seg.angle for seg in segs)
-    target = math.copysign(2.0 * math.pi, turning)
+    target = min((-2.0 * math.pi, 0.0, 2.0 * math.pi), key=lambda t: abs(turning - t))
     if abs(turning - target) > angle_tolerance:
         raise TrackError(
             f"The arcs turn by {math.degrees(turning):.2f} degrees in total; a closed loop turns "
-            "by +-360 degrees: change the arc angles."
+            "by +-360 degrees (or by 0 degrees, a figure-eight): change the arc angles."
         )
-    scale = target / turning
-    segs = [Arc(seg.radius, seg.angle * scale) if isinstance(seg, Arc) else seg for seg in segs]
+    if target == 0.0:
+        # A figure-eight: scale the left-hand arcs so that they undo the right-hand ones exactly.
+        left = sum(seg.angle for seg in segs if seg.angle > 0.0)
+        if left <= 0.0:
+            raise TrackError("A layout that turns by 0 degrees needs left- and right-hand arcs.")
+        scale = (left - turning) / left
+        segs = [
+            Arc(seg.radius, seg.angle * scale) if isinstance(seg, Arc) and seg.angle > 0 else seg
+            for seg in segs
+        ]
+    else:
+        scale = target / turning
+        segs = [Arc(seg.radius, seg.angle * scale) if isinstance(seg, Arc) else seg for seg in segs]
     straight_idx = [i for i, seg in enumerate(segs) if isinstance(seg, Straight)]
     original = {i: segs[i].length for i in straight_idx}
     spread = 0.0
