@@ -207,9 +207,11 @@ def evaluate_weights(
 
     Parameters
     ----------
-    spec : LapSpec
+    spec : LapSpec or sequence of LapSpec
         The lap (track, plan, controller, options); ``weights`` update its own ``weights`` (the
-        ones not tuned keep the spec's values, or the controller's defaults).
+        ones not tuned keep the spec's values, or the controller's defaults). Several specs (one
+        per circuit, say) score the weights on all of them: the objective is then the mean over
+        specs and seeds, so weights are tuned for circuits in general rather than for one.
     weights : dict
         Controller weights, for the MPCs the fields of ``MPCSettings`` such as ``w_ey``.
     seeds : int or iterable of int
@@ -231,6 +233,9 @@ def evaluate_weights(
     """
     from racing_lib.experiment import make_controller
 
+    if isinstance(spec, (list, tuple)):
+        return float(np.mean([evaluate_weights(one, weights, seeds, w_t=w_t, w_s=w_s)
+                              for one in spec]))  # fmt: skip
     merged = {**(spec.weights or {}), **{k: float(v) for k, v in weights.items()}}
     lap_spec = dataclasses.replace(spec, weights=merged)
     return _mean_objective(lap_spec, lambda: make_controller(lap_spec), seeds, w_t, w_s)
@@ -1174,8 +1179,9 @@ def generate_tuned_weights(
     ----------
     configs : iterable of str
         Names of :data:`TUNING_CONFIGS`.
-    track : str or Track
-        The track tuned on (the paper tunes on its main track).
+    track : str, Track or sequence of them
+        The track tuned on (the paper tunes on its main track), or several (names, CSV files,
+        Tracks): the objective is then their mean, for weights that carry over to other circuits.
     seeds : int or iterable of int
         Seeds of the laps scoring every candidate.
     settings : TuningSettings, optional
@@ -1203,7 +1209,8 @@ def generate_tuned_weights(
             "initial=None."
         )
 
-    trk = track if isinstance(track, Track) else load_track(str(track))
+    track_list = list(track) if isinstance(track, (list, tuple)) else [track]
+    tracks = [t if isinstance(t, Track) else load_track(str(t)) for t in track_list]
     target = (
         FilePath(out)
         if out is not None
@@ -1215,7 +1222,8 @@ def generate_tuned_weights(
         data.setdefault("configs", {})
     results: dict[str, TuningResult] = {}
     for name in configs:
-        spec = config_spec(name, trk)
+        specs = [config_spec(name, trk) for trk in tracks]
+        spec = specs[0] if len(specs) == 1 else specs
         res = tune_weights(
             spec,
             seeds,
@@ -1236,13 +1244,15 @@ def generate_tuned_weights(
                 "objective": res.best_objective,
                 "objective_at_defaults": at_defaults,
                 "success": res.success,
-                "track": trk.name,
+                "track": tracks[0].name if len(tracks) == 1 else [t.name for t in tracks],
                 "plan": TUNING_CONFIGS[name]["method"],
-                "planned_lap_time_s": float(spec.trajectory.lap_time),
+                "planned_lap_time_s": float(specs[0].trajectory.lap_time)
+                if len(specs) == 1
+                else [float(one.trajectory.lap_time) for one in specs],
                 "model_params": "identified",
                 "options": TUNING_CONFIGS[name]["options"],
-                "controller": spec.controller,
-                "smooth_transition": spec.smooth_transition,
+                "controller": specs[0].controller,
+                "smooth_transition": specs[0].smooth_transition,
                 "seeds": list(_seed_tuple(seeds)),
                 "generations": res.generations,
                 "evaluations": res.evaluations,
