@@ -293,6 +293,20 @@ def test_lap_evaluation_is_the_objective_of_the_lap(circle_spec):
     assert res.metrics.completed and expected < INCOMPLETE_PENALTY
 
 
+def test_weights_scored_on_several_circuits_get_the_mean_objective(circle_spec):
+    import dataclasses
+
+    from racing_lib.tracks import circle_track
+
+    wider = circle_track(radius=150.0, width=12.0)
+    other = dataclasses.replace(
+        circle_spec, track=wider, trajectory=Trajectory.from_centerline(wider).scale_speed(0.75)
+    )
+    one, two = evaluate_weights(circle_spec, {}, (0,)), evaluate_weights(other, {}, (0,))
+    assert one != two
+    assert evaluate_weights([circle_spec, other], {}, (0,)) == pytest.approx(0.5 * (one + two))
+
+
 SMALL = TuningSettings(popsize=4, max_generations=2, seed=2)
 
 
