@@ -168,3 +168,23 @@ def test_expressway_cold_start():
     res = solve_time_optimal(load_track("expressway"), start="cold")
     assert res.success, res.status
     assert 85.0 < res.lap_time < 105.0
+
+
+def test_what_the_plan_asks_of_the_car_against_what_it_has(oval, nlp):
+    from racing_lib.planning.curvature import OPEN_MARGIN
+    from racing_lib.planning.demands import plan_demands
+
+    demands = {d.name: d for d in plan_demands(nlp.trajectory, PARAMS, track=oval)}
+    # The plan drives at the limit of the ellipse it was given (the full model here: no margin)
+    # and no further, measured from its own motion (first differences on a 2.5 m grid).
+    assert 0.9 < demands["tyre use"].share < 1.03
+    # Its slip stays below the bound of the NLP (95 % of the peak force), so well below the peak.
+    bounds = PARAMS.slip_angle_at(SETTINGS.slip_force_share)
+    assert demands["front slip"].peak < math.degrees(bounds[0]) + 0.05
+    assert demands["rear slip"].peak < math.degrees(bounds[1]) + 0.05
+    assert demands["steering angle"].share < 1.0
+    # ModelParams() carries the placeholder pedal map, which has no power limit: the plan asks
+    # for more than the engine's 71 kW at the wheels, and the check must say so (the identified
+    # map's power limit keeps real plans within it: bench_circuits, chapter 08).
+    assert demands["drive power"].share > 1.1
+    assert demands["edge clearance"].peak > OPEN_MARGIN - 0.05

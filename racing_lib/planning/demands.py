@@ -1,0 +1,155 @@
+"""What a plan asks of the car, along the whole lap, against what the car has.
+
+A controller cannot follow a plan the car cannot drive. Before driving a plan on a new circuit,
+:func:`plan_demands` evaluates, at every node, the quantities that decide whether it is drivable,
+and reports the largest of each against its limit:
+
+* **tyre use**: the share of the identified friction ellipse the plan uses (the planner's g-g
+  ellipse; 1 = the model's limit, ``1 - GRIP_MARGIN`` what plans are made for). The accelerations
+  come from the plan's own motion, not from a tyre model: laterally ``dv_y/dt + r v_x``, along the
+  car ``dv_x/dt - r v_y`` plus what drag and rolling resistance take, so the measure does not
+  depend on the friction the plan was made with;
+* **front and rear slip angles** against those of the Pacejka peaks;
+* **yaw rate** (information: what the tyres allow is in the tyre use);
+* **steering angle and steering rate** against the car's actuator (angle and slew-rate limits);
+* **drive power**, ``m a_x v_x`` when accelerating, against the engine's power at the wheels;
+* **edge clearance**: the smallest gap between the car's side and a track edge (with a track);
+* **grade**: the steepest road pitch along the plan (with a track; information, no limit).
+
+Taught in notebook 08 (your own circuit).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+__all__ = ["Demand", "format_demands", "plan_demands"]
+
+
+@dataclass(frozen=True)
+class Demand:
+    """The largest value of one quantity along a plan.
+
+    Attributes
+    ----------
+    name : str
+        What is measured (``"tyre use"``, ``"rear slip"`` ...).
+    unit : str
+        Unit of ``peak`` and ``limit``.
+    peak : float
+        The largest value along the lap (for the edge clearance: the smallest gap between the
+        car's side and an edge, m).
+    s : float
+        Arc length of the plan where it occurs, m.
+    limit : float
+        What the car has (NaN where there is no limit).
+    """
+
+    name: str
+    unit: str
+    peak: float
+    s: float
+    limit: float
+
+    @property
+    def share(self) -> float:
+        """``peak / limit``: above 1 the car cannot do what the plan asks (NaN without a limit,
+        and for the edge clearance, whose limit is 0 m: negative means over the edge)."""
+        if not math.isfinite(self.limit) or self.limit == 0.0:
+            return math.nan
+        return self.peak / self.limit
+
+
+def _largest(name: str, unit: str, values: np.ndarray, s: np.ndarray, limit: float) -> Demand:
+    k = int(np.argmax(values))
+    return Demand(name, unit, float(values[k]), float(s[k]), float(limit))
+
+
+def plan_demands(
+    trajectory: Any, params: Any = None, vehicle: Any = None, track: Any = None
+) -> list[Demand]:
+    """The largest demand of each kind along ``trajectory`` (see the module notes).
+
+    Parameters
+    ----------
+    trajectory : Trajectory
+        The plan.
+    params : ModelParams, optional
+        The planning model the demands are measured with, at its full (identified) friction
+        (default: ``racing_lib.sysid.identified_params()``).
+    vehicle : VehicleParams, optional
+        The car's actuator and engine (default: the simulated car's ``VehicleParams()``).
+    track : Track, optional
+        For the edge clearance and the grade.
+
+    Returns
+    -------
+    list of Demand
+        In the order of the module notes.
+    """
+    from racing_lib.vehicle import VehicleParams
+
+    if params is None:
+        from racing_lib.sysid import identified_params
+
+        params = identified_params()
+    vehicle = vehicle if vehicle is not None else VehicleParams()
+    s = np.asarray(trajectory.s, dtype=float)
+    t = np.asarray(trajectory.t, dtype=float)
+    vx = np.asarray(trajectory.vx, dtype=float)
+    vy = np.asarray(trajectory.vy, dtype=float)
+    r = np.asarray(trajectory.r, dtype=float)
+    delta = np.asarray(trajectory.delta, dtype=float)
+    ax = np.asarray(trajectory.ax, dtype=float)
+
+    # Time derivatives on the closed lap (the node after the last is the first, one lap later).
+    t_next = np.append(t[1:], trajectory.lap_time)
+    dt = np.maximum(t_next - t, 1e-9)
+    dvx = (np.roll(vx, -1) - vx) / dt
+    dvy = (np.roll(vy, -1) - vy) / dt
+    a_lat = dvy + r * vx
+    resist = (params.C_xw * vx * vx) / params.m + params.c_rr * params.g
+    a_long = dvx - r * vy + resist
+    grip = params.peak_acceleration()
+    grip_x = min(grip, params.pedal.full_brake())
+    use = np.hypot(a_long / grip_x, a_lat / grip)
+
+    v_safe = np.maximum(vx, 1.0)
+    alpha_f = delta - np.arctan((vy + params.l_f * r) / v_safe)
+    alpha_r = -np.arctan((vy - params.l_r * r) / v_safe)
+    a_f, a_r = params.peak_slip_angle()
+    steer_rate = np.abs(np.roll(delta, -1) - delta) / dt
+    power = params.m * np.maximum(ax, 0.0) * vx / 1e3
+    power_max = vehicle.power_max * vehicle.driveline_efficiency / 1e3
+    out = [
+        _largest("tyre use", "-", use, s, 1.0),
+        _largest("front slip", "deg", np.degrees(np.abs(alpha_f)), s, math.degrees(a_f)),
+        _largest("rear slip", "deg", np.degrees(np.abs(alpha_r)), s, math.degrees(a_r)),
+        _largest("yaw rate", "rad/s", np.abs(r), s, math.nan),
+        _largest("steering angle", "rad", np.abs(delta), s, vehicle.steer_max),
+        _largest("steering rate", "rad/s", steer_rate, s, vehicle.steer_rate_max),
+        _largest("drive power", "kW", power, s, power_max),
+    ]
+    if track is not None:
+        s_c, e_c = track.centerline.to_frenet_along(trajectory.x, trajectory.y)
+        gap = np.minimum(track.width_left(s_c) - e_c, track.width_right(s_c) + e_c)
+        gap = gap - 0.5 * vehicle.width
+        k = int(np.argmin(gap))
+        out.append(Demand("edge clearance", "m", float(gap[k]), float(s[k]), 0.0))
+        grade = np.degrees(np.abs(np.asarray(track.grade(s_c), dtype=float)))
+        out.append(_largest("grade", "deg", grade, s, math.nan))
+    return out
+
+
+def format_demands(demands: list[Demand]) -> str:
+    """The demands as a small text table (value, limit, share, where)."""
+    lines = [f"{'demand':<15} {'largest':>9} {'limit':>9} {'share':>7}  {'at s':>8}"]
+    for d in demands:
+        share = "" if math.isnan(d.share) else f"{d.share:7.2f}"
+        limit = "" if math.isnan(d.limit) else f"{d.limit:9.3g}"
+        lines.append(f"{d.name:<15} {d.peak:9.3g} {limit:>9} {share:>7}  {d.s:6.0f} m  ({d.unit})")
+    return "\n".join(lines)
