@@ -1157,6 +1157,20 @@ def config_spec(
     )
 
 
+def main_tuning_tracks() -> list[Any]:
+    """The circuits the shipped weights of ``'main'`` are tuned on, all made by the package.
+
+    The expressway (walls, the paper's main track), the shortcut (open, sharper corners) and a
+    figure-eight with a bridge (walls, two slow lobes): weights that score well on the mean of
+    the three are not tuned to one layout, and every real circuit stays unseen for testing them
+    (``benchmarks/bench_circuits.py``).
+    """
+    from racing_lib.track import load_track
+    from racing_lib.tracks import figure_eight_track
+
+    return [load_track("expressway"), load_track("shortcut"), figure_eight_track(80.0, 12.0)]
+
+
 def generate_tuned_weights(
     configs: Iterable[str] = ("main",),
     *,
@@ -1282,6 +1296,7 @@ __all__ = [
     "evaluate_nominal_gains",
     "evaluate_weights",
     "generate_tuned_weights",
+    "main_tuning_tracks",
     "history_summary",
     "mpc_weight_space",
     "nominal_gain_space",
