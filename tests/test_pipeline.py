@@ -23,12 +23,18 @@ TRIAL_FIELDS = {
 
 
 # --------------------------------------------------------------------------------------------------
-# The real track: curvature plan and coupled MPC (about 5 s)
+# The real track: curvature plan and coupled MPC (about 15 s)
+
+#: Seeds of the curvature-plan laps. Their fate is a property of several laps, never of one: a
+#: single closed lap can flip with last-bit floating-point differences between machines.
+CURVATURE_SEEDS = 3
 
 
 @pytest.fixture(scope="module")
 def curvature_race() -> RaceResult:
-    return race("expressway", method="curvature", controller="coupled-mpc", seed=0)
+    return race(
+        "expressway", method="curvature", controller="coupled-mpc", seed=0, trials=CURVATURE_SEEDS
+    )
 
 
 def test_the_lap_tracks_the_plan_that_was_made(curvature_race):
@@ -38,9 +44,19 @@ def test_the_lap_tracks_the_plan_that_was_made(curvature_race):
     # An MPC tracks the plan itself: its reference lap time is the plan's.
     assert r.spec.trajectory is r.plan.trajectory
     assert r.planned_lap_time == r.plan.lap_time
-    assert r.completed and r.lap.metrics.completed
-    assert np.isfinite(r.metrics.lap_time_s) and r.metrics.lap_time_s > 0.0
-    assert r.seeds == [0]
+    assert r.seeds == list(range(CURVATURE_SEEDS))
+
+
+def test_the_curvature_plan_is_driven_robustly(curvature_race):
+    # Robust properties with margins (measured: every seed completes, +2-3 % over the plan).
+    metrics = [lap.metrics for lap in curvature_race.laps]
+    done = [m for m in metrics if m.completed]
+    assert len(done) >= len(metrics) - 1
+    for m in done:
+        assert np.isfinite(m.lap_time_s)
+        assert m.lap_time_s < 1.08 * curvature_race.planned_lap_time, f"seed {m.seed}"
+        assert m.controller_stats["fallback_brake"] <= 5, f"seed {m.seed}"
+    assert 0.0 < curvature_race.lap_time_gap < 6.0
 
 
 def test_the_weights_are_those_the_library_picks(curvature_race):
@@ -50,9 +66,10 @@ def test_the_weights_are_those_the_library_picks(curvature_race):
 
 
 def test_driving_the_spec_again_gives_the_same_lap(curvature_race):
-    # race adds nothing to the library's lap: the same spec and seed give the same log.
+    # race adds nothing to the library's lap: the same spec and seed give the same log, bit for
+    # bit, in the same process (completed or not).
     again = drive_lap(curvature_race.spec, seed=0)
-    assert again.metrics.lap_time_s == curvature_race.metrics.lap_time_s
+    np.testing.assert_array_equal(again.metrics.lap_time_s, curvature_race.metrics.lap_time_s)
     np.testing.assert_array_equal(again.log.vx, curvature_race.lap.log.vx)
     np.testing.assert_array_equal(again.log.ey, curvature_race.lap.log.ey)
 
@@ -62,13 +79,16 @@ def test_summary_has_the_fields_of_the_lap_command(curvature_race):
     assert set(summary) == {"track", "controller", "planned_lap_time_s", "trials", "summary"}
     assert summary["controller"] == "coupled-mpc"
     assert summary["planned_lap_time_s"] == curvature_race.plan.lap_time
-    (trial,) = summary["trials"]
-    assert set(trial) == TRIAL_FIELDS
-    assert summary["summary"]["completed"] == 1
-    assert summary["summary"]["lap_time_mean_s"] == curvature_race.metrics.lap_time_s
+    trials = summary["trials"]
+    assert [t["seed"] for t in trials] == curvature_race.seeds
+    assert all(set(t) == TRIAL_FIELDS for t in trials)
+    metrics = [lap.metrics for lap in curvature_race.laps]
+    done = [m.lap_time_s for m in metrics if m.completed]
+    assert summary["summary"]["completed"] == len(done)
+    if done:
+        assert summary["summary"]["lap_time_mean_s"] == pytest.approx(np.mean(done))
     table = curvature_race.table()
-    assert "curvature" in table and "1 of 1" in table
-    assert f"{curvature_race.metrics.lap_time_s:.2f} s" in table
+    assert "curvature" in table and f"{len(done)} of {len(metrics)}" in table
 
 
 # --------------------------------------------------------------------------------------------------
@@ -150,3 +170,27 @@ def test_bad_names_are_one_clear_error(kwargs, error, hint, monkeypatch):
         monkeypatch.setattr("racing_lib.pipeline.plan", no_planning)
     with pytest.raises(error, match=hint):
         race(**kwargs)
+
+
+# --------------------------------------------------------------------------------------------------
+# A circuit that crosses itself on a bridge (about 15 s)
+
+
+def test_a_figure_eight_loads_plans_and_drives():
+    from racing_lib.tracks import figure_eight_track
+
+    track = figure_eight_track(radius=80.0, width=12.0)
+    (crossing,) = track.centerline.crossings
+    r = race(track, method="time-optimal", controller="coupled-mpc", trials=2)
+    assert r.plan.success
+    # The plan's line crosses itself too, at the same place, and the MPC follows it through.
+    assert len(r.plan.trajectory.path.crossings) == 1
+    for lap in r.laps:
+        m = lap.metrics
+        assert m.completed and m.wall_contacts == 0, f"seed {m.seed}"
+        # Projected on the wrong branch at the crossing, e_y would jump by tens of metres.
+        assert m.ey_max_m < 3.0, f"seed {m.seed}"
+        # s_ref runs through the crossing without a jump (the lap is driven once round).
+        s = np.unwrap(lap.log.s_ref, period=r.plan.trajectory.length)
+        assert np.all(np.diff(s) > 0.0) and np.all(np.diff(s) < 10.0)
+    assert 0.0 < r.lap_time_gap < 5.0
