@@ -94,6 +94,80 @@ def test_not_a_plan_file_is_refused(tmp_path):
         Trajectory.load_csv(bad)
 
 
+def _damaged(lines: list[str], how: str) -> str:
+    """A plan file's text damaged in one of the ways a user's copy can be."""
+    header = next(i for i, line in enumerate(lines) if line.startswith("s_m"))
+    rows, last = lines[header + 1 : -1], lines[-1:]
+
+    def faster(line: str) -> str:
+        fields = line.split(",")
+        fields[5] = repr(float(fields[5]) * 1.5)
+        return ",".join(fields) + ("" if fields[-1].endswith("\n") else "\n")
+
+    if how == "cut at a row boundary":
+        return "".join(lines[: header + 1] + rows[: len(rows) // 2])
+    if how == "cut inside a row":
+        return "".join(lines[: header + 1] + rows[:10]) + rows[10][:15]
+    if how == "header only":
+        return "".join(lines[: header + 1])
+    if how == "lap time edited":
+        return "".join(
+            line.replace("planned_lap_time_s: ", "planned_lap_time_s: 1") for line in lines
+        )
+    if how == "speeds scaled by 1.5":
+        return "".join(lines[: header + 1] + [faster(line) for line in rows] + last)
+    if how == "rows spliced on":
+        return "".join(lines + rows[:5])
+    if how == "checksum line removed":
+        return "".join(lines[:-1])
+    raise AssertionError(how)
+
+
+@pytest.mark.parametrize(
+    ("how", "says"),
+    [
+        ("cut at a row boundary", "cut short"),
+        ("cut inside a row", "data row 11 has"),
+        ("header only", "no rows"),
+        ("lap time edited", "fails its checksum"),
+        ("speeds scaled by 1.5", "fails its checksum"),
+        ("rows spliced on", "spliced"),
+        ("checksum line removed", "cut short"),
+    ],
+)
+def test_a_damaged_plan_file_is_refused(tmp_path, circle_plan, how, says):
+    track, traj = circle_plan
+    good = tmp_path / "plan.csv"
+    traj.save_csv(good)
+    bad = tmp_path / "damaged.csv"
+    bad.write_text(_damaged(good.read_text().splitlines(keepends=True), how))
+    with pytest.raises(PlanningError) as err:
+        Trajectory.load_csv(bad, track=track)
+    msg = str(err.value)
+    assert says in msg and "damaged.csv" in msg and "re-plan" in msg
+
+
+def test_a_plan_file_survives_windows_line_endings_and_a_bom(tmp_path, circle_plan):
+    track, traj = circle_plan
+    good = tmp_path / "plan.csv"
+    traj.save_csv(good)
+    text = good.read_text()
+    copy = tmp_path / "copied.csv"
+    copy.write_bytes(("\ufeff" + text.replace("\n", "\r\n")).encode("utf-8"))
+    back = Trajectory.load_csv(copy, track=track)
+    np.testing.assert_array_equal(back.vx, Trajectory.load_csv(good).vx)
+
+
+def test_an_old_plan_file_without_checksum_is_refused(tmp_path, circle_plan):
+    _, traj = circle_plan
+    good = tmp_path / "plan.csv"
+    traj.save_csv(good)
+    old = tmp_path / "old.csv"
+    old.write_text(good.read_text().replace("format_version: 2", "format_version: 1"))
+    with pytest.raises(PlanningError, match="older racing_lib without a checksum"):
+        Trajectory.load_csv(old)
+
+
 def test_inconsistent_arrays_are_refused(circle_plan):
     _, traj = circle_plan
     with pytest.raises(PlanningError, match="one value per node"):

@@ -13,6 +13,7 @@ track centerline the planners work on, so ``trajectory.path`` and ``trajectory.s
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import io
 import json
 import math
@@ -29,7 +30,7 @@ from racing_lib.io import atomic_write_text
 from racing_lib.planning.speed import speed_profile
 
 #: Version of the plan CSV format written by :meth:`Trajectory.save_csv`.
-PLAN_FORMAT_VERSION = 1
+PLAN_FORMAT_VERSION = 2
 
 #: The columns of a plan CSV, in order (units in the names).
 PLAN_COLUMNS = (
@@ -261,7 +262,7 @@ class Trajectory:
 
     # ------------------------------------------------------------------ files
     def metadata(self) -> dict[str, Any]:
-        """The metadata written in a plan file's header."""
+        """The metadata written in a plan file's header (the checksum line excluded)."""
         return {
             "format_version": PLAN_FORMAT_VERSION,
             "track": self.track_name,
@@ -277,9 +278,10 @@ class Trajectory:
         """Write the plan CSV atomically (temporary file, then rename).
 
         Format: ``#`` metadata lines (``# key: value``: format version, track name and checksum,
-        method, model options as JSON, planned lap time), then the header
-        ``s_m,x_m,y_m,psi_rad,kappa_radpm,vx_mps,vy_mps,r_radps,ax_mps2,delta_rad,t_s`` and one row
-        per node.
+        method, model options as JSON, planned lap time, line length, node count), the header
+        ``s_m,x_m,y_m,psi_rad,kappa_radpm,vx_mps,vy_mps,r_radps,ax_mps2,delta_rad,t_s``, one row
+        per node, and last a ``# sha256: ...`` line: the checksum of every line above it. The
+        loader recomputes it, so a truncated, edited or spliced plan is refused instead of driven.
         """
         buf = io.StringIO()
         buf.write("# racing_lib plan\n")
@@ -288,11 +290,17 @@ class Trajectory:
         buf.write(",".join(PLAN_COLUMNS) + "\n")
         data = np.column_stack([getattr(self, name) for name in _FIELDS])
         np.savetxt(buf, data, delimiter=",", fmt="%.9g")
-        atomic_write_text(path, buf.getvalue())
+        text = buf.getvalue()
+        atomic_write_text(path, text + f"# sha256: {_plan_digest(text)}\n")
 
     @classmethod
     def load_csv(cls, path: str | os.PathLike[str], track: Any = None) -> Trajectory:
-        """Read a plan CSV written by :meth:`save_csv`.
+        """Read a plan CSV written by :meth:`save_csv`, refusing any that is not intact.
+
+        The checksum, the node count and the line length recorded in the file are checked
+        against its rows, so a plan truncated (even at a row boundary), edited by hand or
+        spliced from two files raises a :class:`PlanningError` that names the file and says to
+        re-plan.
 
         Parameters
         ----------
@@ -302,46 +310,49 @@ class Trajectory:
             If given, the plan must have been made for this track (same checksum); otherwise a
             :class:`PlanningError` names both tracks.
         """
+        where = os.fspath(path)
         try:
-            with open(path, encoding="utf-8") as fh:
+            with open(path, encoding="utf-8-sig") as fh:
                 text = fh.read()
-        except OSError as exc:
-            raise PlanningError(f"cannot read plan file {os.fspath(path)!r}: {exc}") from exc
-        meta: dict[str, str] = {}
-        lines = text.splitlines()
-        body_start = 0
-        for i, line in enumerate(lines):
-            if line.startswith("#"):
-                key, sep, value = line[1:].partition(":")
-                if sep:
-                    meta[key.strip()] = value.strip()
-                continue
-            body_start = i
-            break
-        header = lines[body_start].strip().split(",") if lines[body_start:] else []
+        except (OSError, UnicodeDecodeError) as exc:
+            raise PlanningError(f"cannot read plan file {where!r}: {exc}") from exc
+        meta, header, rows, digest_line = _split_plan_text(text)
+        replan = "re-plan with `racing-lib plan --out PLAN.csv`"
         if tuple(h.strip() for h in header) != PLAN_COLUMNS:
             raise PlanningError(
-                f"{os.fspath(path)!r} is not a racing_lib plan CSV: expected the header "
+                f"{where!r} is not a racing_lib plan CSV: expected the header "
                 f"{','.join(PLAN_COLUMNS)}; make one with `racing-lib plan --out PLAN.csv`."
             )
-        version = int(meta.get("format_version", "0") or 0)
+        version = _int_or(meta.get("format_version"), 0)
         if version > PLAN_FORMAT_VERSION:
             raise PlanningError(
-                f"plan file {os.fspath(path)!r} has format version {version}, newer than this "
+                f"plan file {where!r} has format version {version}, newer than this "
                 f"racing_lib understands ({PLAN_FORMAT_VERSION}); upgrade racing_lib or re-plan."
             )
-        try:
-            data = np.loadtxt(
-                io.StringIO("\n".join(lines[body_start + 1 :])), delimiter=",", ndmin=2
+        if version < PLAN_FORMAT_VERSION:
+            raise PlanningError(
+                f"plan file {where!r} has format version {version}, written by an older "
+                f"racing_lib without a checksum, so it cannot be verified; {replan}."
             )
-        except ValueError as exc:
+        if not rows:
+            raise PlanningError(f"plan file {where!r} has a header but no rows; {replan}.")
+        data = _parse_plan_rows(rows, where, replan)
+        if digest_line is None:
             raise PlanningError(
-                f"plan file {os.fspath(path)!r} has unreadable rows: {exc}"
-            ) from exc
-        if data.shape[1] != len(PLAN_COLUMNS):
+                f"plan file {where!r} ends without its '# sha256:' line: it was cut short; "
+                f"{replan}."
+            )
+        nodes = _int_or(meta.get("nodes"), -1)
+        if nodes != len(data):
             raise PlanningError(
-                f"plan file {os.fspath(path)!r} has {data.shape[1]} columns, expected "
-                f"{len(PLAN_COLUMNS)}; re-plan with `racing-lib plan`."
+                f"plan file {where!r} has {len(data)} rows where its header says {nodes} (it "
+                f"was cut short or spliced); {replan}."
+            )
+        body = text[: text.rindex("# sha256:")].lstrip("\ufeff")
+        if digest_line != _plan_digest(body):
+            raise PlanningError(
+                f"plan file {where!r} fails its checksum (its numbers or header were changed "
+                f"after it was written), so the plan cannot be trusted; {replan}."
             )
         name = meta.get("track", "")
         checksum = meta.get("track_checksum", "")
@@ -349,7 +360,7 @@ class Trajectory:
             want = track.checksum()
             if checksum != want:
                 raise PlanningError(
-                    f"plan {os.fspath(path)!r} was made for track {name!r} (checksum "
+                    f"plan {where!r} was made for track {name!r} (checksum "
                     f"{checksum[:12] or 'none'}), not for track {track.name!r} (checksum "
                     f"{want[:12]}); re-plan with `racing-lib plan --track {track.name}`."
                 )
@@ -525,3 +536,56 @@ def _node_arc_length(path: Any, x: np.ndarray, y: np.ndarray) -> np.ndarray:
     chord = np.hypot(np.diff(np.append(x, x[0])), np.diff(np.append(y, y[0])))
     s = np.concatenate(([0.0], np.cumsum(chord[:-1])))
     return s * float(path.length) / float(np.sum(chord))
+
+
+def _plan_digest(text: str) -> str:
+    """SHA-256 of a plan file's text above its checksum line (line endings normalized)."""
+    canonical = "\n".join(line.rstrip() for line in text.splitlines())
+    return hashlib.sha256(canonical.encode("utf-8")).hexdigest()
+
+
+def _int_or(value: str | None, default: int) -> int:
+    try:
+        return int(value) if value is not None else default
+    except ValueError:
+        return default
+
+
+def _split_plan_text(text: str) -> tuple[dict[str, str], list[str], list[str], str | None]:
+    """A plan file's metadata, header fields, data rows and recorded checksum (or None)."""
+    meta: dict[str, str] = {}
+    header: list[str] = []
+    rows: list[str] = []
+    digest: str | None = None
+    for line in text.lstrip("\ufeff").splitlines():
+        if line.startswith("#"):
+            key, sep, value = line[1:].partition(":")
+            if sep and key.strip() == "sha256":
+                digest = value.strip()
+            elif sep and not header:
+                meta[key.strip()] = value.strip()
+        elif not header:
+            header = line.strip().split(",")
+        elif line.strip():
+            rows.append(line)
+    return meta, header, rows, digest
+
+
+def _parse_plan_rows(rows: list[str], where: str, replan: str) -> np.ndarray:
+    """The plan's rows as an (N, 11) array; a short or unreadable row is named by its number."""
+    ncol = len(PLAN_COLUMNS)
+    data = np.empty((len(rows), ncol))
+    for i, line in enumerate(rows):
+        fields = line.split(",")
+        if len(fields) != ncol:
+            raise PlanningError(
+                f"plan file {where!r}: data row {i + 1} has {len(fields)} fields, expected "
+                f"{ncol} (the file is cut short or edited); {replan}."
+            )
+        try:
+            data[i] = [float(f) for f in fields]
+        except ValueError as exc:
+            raise PlanningError(
+                f"plan file {where!r}: data row {i + 1} is not numbers ({exc}); {replan}."
+            ) from exc
+    return data
