@@ -6,6 +6,13 @@ the way out, instead of letting a deep traceback from numpy or a solver reach th
 
 from __future__ import annotations
 
+import functools
+import inspect
+from collections.abc import Callable
+from typing import Any, TypeVar
+
+F = TypeVar("F", bound=Callable[..., Any])
+
 
 class RacingLibError(Exception):
     """Base class of every error racing_lib raises on purpose."""
@@ -29,3 +36,31 @@ class PlanningError(RacingLibError):
 
 class ControlError(RacingLibError, ValueError):
     """A controller cannot produce a command, or was given an unusable one (such as NaN)."""
+
+
+class ArgumentError(RacingLibError, TypeError, ValueError):
+    """An entry point was called with an argument it does not have, or of the wrong kind."""
+
+
+def checked_arguments(func: F) -> F:
+    """Make a misspelled or missing argument of ``func`` an :class:`ArgumentError`.
+
+    Python's own ``TypeError`` for an unknown keyword says only which name it did not expect;
+    the error raised here also lists the parameters that exist, so the way out is in the message.
+    Errors raised inside ``func`` pass through unchanged.
+    """
+    signature = inspect.signature(func)
+
+    @functools.wraps(func)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        try:
+            signature.bind(*args, **kwargs)
+        except TypeError as exc:
+            names = ", ".join(n for n in signature.parameters if n not in ("self", "cls"))
+            raise ArgumentError(
+                f"{func.__qualname__}(): {exc}; its parameters are {names} "
+                f"(see help({func.__qualname__}))."
+            ) from None
+        return func(*args, **kwargs)
+
+    return wrapper  # type: ignore[return-value]

@@ -27,13 +27,15 @@ from __future__ import annotations
 
 import math
 import os
+import warnings
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
+from numbers import Integral
 from typing import Any
 
 import numpy as np
 
-from racing_lib.errors import ControlError, RacingLibError
+from racing_lib.errors import ArgumentError, ControlError, checked_arguments
 from racing_lib.experiment import LapMetrics, LapResult, LapSpec, drive_lap, summarize
 from racing_lib.planning import PlanResult, Trajectory, plan
 from racing_lib.track import Track, load_track
@@ -221,8 +223,10 @@ def _resolve_weights(
     return {str(k): float(v) for k, v in weights.items()}, "given", config
 
 
-def _check_choices(controller: str, weights: str | Mapping[str, float] | None, trials: int) -> None:
-    """Refuse bad names before any planning (which can take tens of seconds)."""
+def _check_choices(
+    controller: str, weights: str | Mapping[str, float] | None, trials: int, seed: int
+) -> None:
+    """Refuse bad names and numbers before any planning (which can take tens of seconds)."""
     from racing_lib.control import CONTROLLER_NAMES
 
     if controller not in CONTROLLER_NAMES:
@@ -242,8 +246,37 @@ def _check_choices(controller: str, weights: str | Mapping[str, float] | None, t
         raise ControlError(
             "the nominal controller takes no MPC weights; drop weights= or use an MPC controller."
         )
-    if int(trials) < 1:
-        raise RacingLibError(f"trials must be at least 1, got {trials}.")
+    if isinstance(trials, bool) or not isinstance(trials, Integral) or trials < 1:
+        raise ArgumentError(f"trials must be a whole number of at least 1, got {trials!r}.")
+    if isinstance(seed, bool) or not isinstance(seed, Integral) or seed < 0:
+        raise ArgumentError(
+            f"seed must be a whole number >= 0 (NumPy seeds cannot be negative), got {seed!r}."
+        )
+
+
+def _check_plan_matches(trajectory: Trajectory, options: Any, say: Callable[[str], None]) -> None:
+    """Warn when a plan was made with other model effects than the controller will predict with.
+
+    A plan made without drag, driven by an MPC that models drag, asks for speeds the controller's
+    model says cost more power than the plan budgeted; the lap still runs, but the gap to the plan
+    then measures the mismatch as much as the controller.
+    """
+    from racing_lib.model import ModelOptions
+    from racing_lib.planning.trajectory import options_to_dict
+
+    planned = trajectory.model_options
+    used = options_to_dict(options if options is not None else ModelOptions())
+    differ = sorted(k for k in planned if k in used and planned[k] != used[k])
+    if not differ:
+        return
+    what = ", ".join(f"{k}: plan {planned[k]}, controller {used[k]}" for k in differ)
+    message = (
+        f"the plan and the controller use different model effects ({what}); pass the same "
+        "options as the plan (on the command line, the same --no-drag / --no-weight-transfer / "
+        "--lateral-weight-transfer flags) to drive the plan with the model it was made with."
+    )
+    warnings.warn(message, ModelMismatchWarning, stacklevel=3)
+    say(f"warning: {message}")
 
 
 def _lap_line(seed: int | None, m: LapMetrics) -> str:
@@ -254,6 +287,7 @@ def _lap_line(seed: int | None, m: LapMetrics) -> str:
     )
 
 
+@checked_arguments
 def race(
     track: str | os.PathLike[str] | Track = "expressway",
     method: str = "time-optimal",
@@ -329,12 +363,17 @@ def race(
         Unknown planning method, or a planner that fails.
     ControlError
         Unknown controller or weights, checked before anything is planned.
-    RacingLibError
-        ``trials`` below 1.
+    ArgumentError
+        ``trials`` below 1, a negative ``seed``, or an argument ``race`` does not have.
+
+    Warns
+    -----
+    ModelMismatchWarning
+        A ``reference`` plan was made with other model options than ``options``.
     """
     say = report or (lambda _line: None)
-    _check_choices(controller, weights, trials)
-    trk = track if isinstance(track, Track) else load_track(os.fspath(track))
+    _check_choices(controller, weights, trials, seed)
+    trk = load_track(track)  # a Track is returned as it is; None or a number is refused
 
     planned: PlanResult | None = None
     if reference is None:
@@ -349,6 +388,9 @@ def race(
         trajectory = Trajectory.load_csv(os.fspath(reference), track=trk)
         plan_method = trajectory.method or method
         say(f"loaded plan {os.fspath(reference)} (planned lap {trajectory.lap_time:.2f} s)")
+
+    if reference is not None and controller != "nominal":
+        _check_plan_matches(trajectory, options, say)
 
     if controller == "nominal":
         from racing_lib.control.nominal import MODERATE_SPEED_SCALE
@@ -391,4 +433,8 @@ def race(
     )
 
 
-__all__ = ["WEIGHT_CHOICES", "RaceResult", "race"]
+class ModelMismatchWarning(UserWarning):
+    """A plan is driven by a controller that predicts with other model effects."""
+
+
+__all__ = ["WEIGHT_CHOICES", "ModelMismatchWarning", "RaceResult", "race"]

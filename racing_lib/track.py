@@ -33,6 +33,12 @@ from scipy.spatial import cKDTree
 
 from racing_lib.errors import TrackError
 from racing_lib.io import atomic_write_text
+from racing_lib.track_geometry import (
+    OVERLAP_STEP,
+    clip_inner_widths,
+    road_overlaps,
+    thin_dense_rows,
+)
 
 __all__ = [
     "CSV_COLUMNS",
@@ -91,6 +97,8 @@ class _Knots:
 
     def locate_scalar(self, s: float) -> tuple[int, float]:
         """As :meth:`locate` for one float, without numpy."""
+        if not -1e12 < s < 1e12:  # NaN fails both comparisons
+            raise TrackError(f"Arc length s must be a finite number of metres, got {s!r}.")
         s = s % self.period
         k = self._bucket[int(s / self.hb)]
         knots = self._s_list
@@ -322,9 +330,7 @@ class Path:
     def __init__(
         self, x: ArrayLike, y: ArrayLike, *, resolution: float = _RESOLUTION, check: bool = True
     ) -> None:
-        pts = np.column_stack(
-            [np.asarray(x, dtype=float).ravel(), np.asarray(y, dtype=float).ravel()]
-        )
+        pts = _coordinates(x, y)
         if not np.all(np.isfinite(pts)):
             bad = int(np.flatnonzero(~np.all(np.isfinite(pts), axis=1))[0])
             raise TrackError(f"Path point {bad} is NaN or infinite; give finite x, y in metres.")
@@ -812,9 +818,35 @@ class Corner:
     angle: float
 
 
+def _coordinates(x: ArrayLike, y: ArrayLike) -> np.ndarray:
+    """Points (n, 2) from x and y, refusing text and arrays of different lengths."""
+    try:
+        xa = np.asarray(x, dtype=float).ravel()
+        ya = np.asarray(y, dtype=float).ravel()
+    except (TypeError, ValueError) as exc:
+        raise TrackError(
+            f"Path x and y must be numbers (m), got {type(x).__name__} and {type(y).__name__} "
+            f"({exc}); convert them, e.g. with np.asarray(x, dtype=float)."
+        ) from None
+    if xa.size != ya.size:
+        raise TrackError(f"Path x has {xa.size} values but y has {ya.size}; give one y per x (m).")
+    return np.column_stack([xa, ya])
+
+
+def _as_floats(values, what: str) -> np.ndarray:
+    """A profile's values as floats, or a TrackError that names the profile."""
+    try:
+        return np.asarray(values, dtype=float)
+    except (TypeError, ValueError):
+        raise TrackError(
+            f"The {what} must be a number of metres or an array of them, got {values!r}."
+        ) from None
+
+
 def _profile_on_grid(path: Path, values, s, what: str) -> np.ndarray:
     """Values of a profile (float, or samples at arc lengths s) at the path's knots."""
     grid = path.knots
+    values = _as_floats(values, what)
     if np.ndim(values) == 0:
         v = float(values)
         if not math.isfinite(v):
@@ -883,6 +915,11 @@ class Track:
         name: str = "track",
         corners: tuple[Corner, ...] | list[Corner] = (),
     ) -> None:
+        if not isinstance(centerline, Path):
+            raise TrackError(
+                f"Track needs a racing_lib.track.Path as its centerline, got "
+                f"{type(centerline).__name__}; build one with Path(x, y)."
+            )
         if boundary not in ("walls", "open"):
             raise TrackError(f"Track boundary must be 'walls' or 'open', got {boundary!r}.")
         self.name = str(name)
@@ -893,6 +930,8 @@ class Track:
         wl = _profile_on_grid(centerline, width_left, s, "left width")
         wr = _profile_on_grid(centerline, width_right, s, "right width")
         z = _profile_on_grid(centerline, elevation, s, "elevation")
+        grid = centerline.knots
+        wl, wr = clip_inner_widths(grid, centerline.curvature(grid), wl, wr, self.name)
         knots = centerline._knots
         self._wl = _PeriodicSpline(knots, wl)
         self._wr = _PeriodicSpline(knots, wr)
@@ -907,6 +946,32 @@ class Track:
                     f"Track {self.name!r}: the {what} width is not positive near s = "
                     f"{fine[i]:.1f} m ({low[i]:.3f} m); widths must be > 0 m."
                 )
+        self._refuse_overlaps()
+
+    def _refuse_overlaps(self) -> None:
+        """Refuse two far-apart stretches whose roads share ground (bridges excepted)."""
+        line = self.centerline
+        s = line.sample(ds=OVERLAP_STEP)
+        x, y = line.position(s)
+        bridges = [(c.s_a, c.s_b, c.angle_deg) for c in line.crossings]
+        found = road_overlaps(
+            s,
+            np.column_stack([x, y]),
+            np.asarray(line.heading(s), float),
+            self._wl(s),
+            self._wr(s),
+            self.length,
+            bridges,
+        )
+        if found:
+            o = found[0]
+            raise TrackError(
+                f"Track {self.name!r}: the road near s = {o.s_a:.0f} m overlaps the road near "
+                f"s = {o.s_b:.0f} m by {o.depth:.2f} m (their centerlines are {o.distance:.2f} m "
+                f"apart){f', and in {len(found) - 1} more place(s)' if len(found) > 1 else ''}; "
+                "two stretches of road may share ground only where they cross on a bridge. "
+                "Narrow the widths there, or fix the points."
+            )
 
     def corner_positions(self) -> dict[int, float]:
         """The crucial corners as {number: s (m)}, the mapping the plotting functions take."""
@@ -1000,6 +1065,8 @@ class Track:
         where = f"Track file {str(fpath)!r}"
         if len(data) >= 2 and np.hypot(*(data[-1, :2] - data[0, :2])) < _DUPLICATE_TOL:
             data, lines = data[:-1], lines[:-1]  # last row repeats the first: closed explicitly
+        keep = thin_dense_rows(data[:, :2], where)
+        data, lines = data[keep], [lines[k] for k in keep]
         if len(data) < 4:
             raise TrackError(
                 f"{where} has {len(data)} centerline point(s); a closed track needs at least 4 "
@@ -1109,7 +1176,8 @@ def _read_csv_rows(fpath: _FsPath) -> tuple[list[tuple[int, list[float]]], bool]
             f"({', '.join(builtin_track_names())})."
         )
     try:
-        text = fpath.read_text(encoding="utf-8")
+        # utf-8-sig: a byte-order mark, as some spreadsheet programs write, is dropped.
+        text = fpath.read_text(encoding="utf-8-sig")
     except (OSError, UnicodeDecodeError) as err:
         raise TrackError(
             f"{where} cannot be read ({err}); check that it is a readable text CSV."
@@ -1213,8 +1281,9 @@ def load_track(name_or_file: str | os.PathLike) -> Track:
 
     Parameters
     ----------
-    name_or_file : str or os.PathLike
-        ``"expressway"``, ``"shortcut"``... or a path to a racetrack-database CSV.
+    name_or_file : str, os.PathLike or Track
+        ``"expressway"``, ``"shortcut"``... or a path to a racetrack-database CSV (a Track is
+        returned as it is).
 
     Raises
     ------
@@ -1223,6 +1292,13 @@ def load_track(name_or_file: str | os.PathLike) -> Track:
     """
     from racing_lib import tracks
 
+    if isinstance(name_or_file, Track):
+        return name_or_file
+    if not isinstance(name_or_file, str | os.PathLike):
+        raise TrackError(
+            f"load_track needs a track name or a CSV path, got {name_or_file!r}; built-in "
+            f"tracks are {', '.join(builtin_track_names())}."
+        )
     text = os.fspath(name_or_file)
     key = text.strip().lower()
     if key in tracks.BUILTIN:

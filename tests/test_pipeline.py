@@ -146,6 +146,19 @@ def test_a_plan_file_and_the_nominal_controller(stadium, tmp_path):
         race("expressway", controller="nominal", reference=path)
 
 
+def test_a_plan_driven_with_other_model_effects_warns(stadium):
+    from racing_lib.pipeline import ModelMismatchWarning
+
+    track, reference = stadium
+    no_drag = dataclasses.replace(
+        reference, model_options={**reference.model_options, "drag": False}
+    )
+    lines = []
+    with pytest.warns(ModelMismatchWarning, match="drag: plan False, controller True"):
+        race(track, controller="coupled-mpc", reference=no_drag, report=lines.append)
+    assert any(line.startswith("warning: the plan and the controller") for line in lines)
+
+
 # --------------------------------------------------------------------------------------------------
 # Bad input: one clear error, before any planning
 
@@ -160,6 +173,10 @@ def test_a_plan_file_and_the_nominal_controller(stadium, tmp_path):
         ({"weights": 3.0}, ControlError, "dict"),
         ({"controller": "nominal", "weights": {"w_ey": 1.0}}, ControlError, "nominal"),
         ({"trials": 0}, RacingLibError, "at least 1"),
+        ({"seed": -5}, RacingLibError, "seed must be a whole number >= 0"),
+        ({"seed": 1.5}, RacingLibError, "seed must be a whole number"),
+        ({"bogus": 1}, RacingLibError, "unexpected keyword argument 'bogus'.*parameters are"),
+        ({"track": None}, TrackError, "track name or a CSV path"),
     ],
 )
 def test_bad_names_are_one_clear_error(kwargs, error, hint, monkeypatch):

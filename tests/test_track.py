@@ -485,3 +485,67 @@ def test_track_rejects_bad_arguments():
         Track(path, 5.0, 0.0)
     with pytest.raises(TrackError, match="NaN"):
         path.to_frenet(np.nan, 1.0)
+
+
+# --------------------------------------------------------------------------------------------------
+# Geometry a file can state but a car cannot drive
+
+
+def test_an_inner_width_past_the_turn_centre_is_clipped_with_a_warning_that_says_where():
+    from racing_lib.track_geometry import INNER_WIDTH_SHARE, TrackGeometryWarning
+
+    # A circle of radius 3 m driven anticlockwise: the left side is the inside.
+    t = np.linspace(0.0, 2.0 * np.pi, 40, endpoint=False)
+    line = Path(3.0 * np.cos(t), 3.0 * np.sin(t))
+    with pytest.warns(TrackGeometryWarning, match=r"left \(inner\) width .* radius 2\.99 m"):
+        track = Track(line, 5.0, 5.0, name="hairpin")
+    s = line.sample(n=50)
+    # Nowhere does the inner edge reach the centre any more; the outer width is untouched.
+    assert np.max(track.width_left(s)) <= INNER_WIDTH_SHARE * 3.0 + 0.01
+    np.testing.assert_allclose(track.width_right(s), 5.0)
+
+
+def test_overlapping_stretches_of_road_are_refused():
+    # An oval pinched in its middle: the long sides run 7 m apart with 4 m of road each side.
+    t = np.linspace(0.0, 2.0 * np.pi, 400, endpoint=False)
+    x = 200.0 * np.cos(t)
+    y = np.sin(t) * (40.0 - 36.5 * np.exp(-((x / 50.0) ** 2)))
+    with pytest.raises(TrackError, match=r"overlaps the road near s = .* by 0\.9\d m"):
+        Track(Path(x, y), 4.0, 4.0, name="pinched")
+    Track(Path(x, y), 3.0, 3.0, name="pinched")  # 1 m apart: fine
+
+
+def test_a_bridge_is_not_an_overlap():
+    from racing_lib.tracks import figure_eight_track
+
+    track = figure_eight_track()
+    assert track.centerline.crossings  # it does cross, on a bridge
+
+
+def test_a_byte_order_mark_is_accepted(tmp_path):
+    plain = write_csv(tmp_path / "plain.csv", ellipse_rows())
+    bom = tmp_path / "bom.csv"
+    bom.write_bytes(b"\xef\xbb\xbf" + plain.read_bytes())
+    assert Track.from_csv(bom).checksum() == Track.from_csv(plain).checksum()
+
+
+def test_very_dense_points_are_thinned_with_a_warning(tmp_path):
+    from racing_lib.track_geometry import TrackGeometryWarning
+
+    # A circle of radius 80 m every 0.1 m, its coordinates rounded to 6 decimals as in the
+    # racetrack-database files.
+    radius = 80.0
+    n = int(2 * np.pi * radius / 0.1)
+    t = np.linspace(0.0, 2.0 * np.pi, n, endpoint=False)
+    x, y = np.round(radius * np.cos(t), 6), np.round(radius * np.sin(t), 6)
+    rows = [(a, b, 5.0, 5.0) for a, b in zip(x, y, strict=True)]
+    path = write_csv(tmp_path / "dense.csv", rows)
+    with pytest.warns(TrackGeometryWarning, match=r"0\.10 m apart .* Every 10th row"):
+        track = Track.from_csv(path)
+    s = track.centerline.sample(ds=1.0)
+
+    def noise(line: Path) -> float:
+        return float(np.max(np.abs(line.curvature(s) * radius - 1.0)))
+
+    assert noise(Path(x, y)) > 0.01  # every point kept: over 1 % curvature noise
+    assert noise(track.centerline) < 0.001  # thinned: under 0.1 %

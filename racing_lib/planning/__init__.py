@@ -16,10 +16,12 @@ Examples
 from __future__ import annotations
 
 import time
+import warnings
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-from racing_lib.errors import PlanningError
+from racing_lib.errors import PlanningError, checked_arguments
 from racing_lib.planning.curvature import (
     CurvatureResult,
     CurvatureSettings,
@@ -43,6 +45,15 @@ METHODS = ("centerline", "curvature", "time-optimal")
 #: limit, the car drove 2.5 % over its plan and touched a wall; with 5 % kept, 0.8 % over and
 #: clean, and the driven lap was 0.8 s faster.
 GRIP_MARGIN = 0.05
+#: Above this many nodes a plan warns of its size before it starts (18 km at the 3 m spacing).
+LARGE_PLAN_NODES = 6000
+#: Rough cost of the time-optimal NLP per node, measured on two cores: seconds and megabytes.
+NLP_SECONDS_PER_NODE = 0.02
+NLP_MEGABYTES_PER_NODE = 0.33
+
+
+class LargePlanWarning(UserWarning):
+    """A plan with many nodes: it will take minutes and gigabytes."""
 
 
 @dataclass
@@ -95,6 +106,23 @@ class PlanResult:
         }
 
 
+def _warn_if_large(track: Any, method: str, spacing: float, say: Callable[[str], None]) -> None:
+    """Warn before a plan that will take minutes and gigabytes, with the way to shrink it."""
+    nodes = int(track.length / spacing)
+    if nodes <= LARGE_PLAN_NODES or method == "centerline":
+        return
+    message = (
+        f"track {track.name!r} is {track.length / 1000:.1f} km long: {nodes} nodes at "
+        f"{spacing:g} m spacing. The time-optimal NLP will take roughly "
+        f"{nodes * NLP_SECONDS_PER_NODE / 60:.0f} min and "
+        f"{nodes * NLP_MEGABYTES_PER_NODE / 1024:.1f} GB of memory; a coarser grid "
+        f"(spacing={2 * spacing:g}, on the command line --spacing {2 * spacing:g}) halves both."
+    )
+    warnings.warn(message, LargePlanWarning, stacklevel=3)
+    say(f"warning: {message}")
+
+
+@checked_arguments
 def plan(
     track: Any,
     method: str = "time-optimal",
@@ -106,6 +134,7 @@ def plan(
     grip_margin: float = GRIP_MARGIN,
     curvature_settings: CurvatureSettings | None = None,
     time_optimal_settings: TimeOptimalSettings | None = None,
+    report: Callable[[str], None] | None = None,
 ) -> PlanResult:
     """Plan a flying lap of ``track`` with one of the three methods.
 
@@ -131,6 +160,9 @@ def plan(
         limit.
     curvature_settings, time_optimal_settings : optional
         Planner settings.
+    report : callable, optional
+        Called with one line of text as each stage starts (for example ``print``), and with the
+        size estimate of a large plan.
 
     Returns
     -------
@@ -140,10 +172,30 @@ def plan(
     ------
     PlanningError
         Unknown method, or a planner that fails (the message names the solver and its status).
+
+    Warns
+    -----
+    LargePlanWarning
+        More than :data:`LARGE_PLAN_NODES` nodes: the estimated time and memory, and the way to
+        make the plan smaller (a larger ``spacing``).
     """
     import dataclasses
 
+    from racing_lib.track import Track
+
     t0 = time.perf_counter()
+    if not isinstance(track, Track):
+        raise PlanningError(
+            f"plan needs a racing_lib Track, got {type(track).__name__}; load one with "
+            "racing_lib.track.load_track('expressway') or load_track('my_circuit.csv')."
+        )
+    if not (isinstance(spacing, int | float) and 0.5 <= spacing <= 20.0):
+        raise PlanningError(
+            f"spacing must be a node spacing between 0.5 and 20 m, got {spacing!r} (the "
+            "planners are tuned for 3 m)."
+        )
+    if start not in ("warm", "cold"):
+        raise PlanningError(f"start must be 'warm' or 'cold', got {start!r}.")
     key = str(method).strip().lower().replace("_", "-")
     if key in ("time-optimal", "timeoptimal", "nlp", "min-time"):
         key = "time-optimal"
@@ -153,6 +205,8 @@ def plan(
         raise PlanningError(
             f"grip_margin must be in [0, 0.5) (a share of the friction), got {grip_margin!r}."
         )
+    say = report or (lambda _line: None)
+    _warn_if_large(track, key, spacing, say)
     if params is None:
         from racing_lib.sysid import identified_params
 
@@ -163,17 +217,20 @@ def plan(
         traj = Trajectory.from_centerline(track, params, options=options, spacing=spacing)
         return PlanResult(traj, key, True, "ok", 0, time.perf_counter() - t0)
     cs = dataclasses.replace(curvature_settings or CurvatureSettings(), spacing=spacing)
+    say(f"curvature QP on {track.name} ({track.length / spacing:.0f} nodes) ...")
     if key == "curvature":
         res = solve_curvature(track, params, options, cs)
         return PlanResult(
             res.trajectory, key, res.success, res.status, res.iterations, res.solve_time, res
         )
     ts = dataclasses.replace(time_optimal_settings or TimeOptimalSettings(), spacing=spacing)
+    say(f"time-optimal NLP ({start} start; IPOPT, up to {ts.max_iter} iterations) ...")
     res = solve_time_optimal(track, params, options, ts, start=start, curvature_settings=cs)
     if res.trajectory is None:
         raise PlanningError(
-            f"time-optimal NLP: IPOPT returned '{res.status}' and no usable trajectory; warm start "
-            "from the curvature plan or increase max_iter."
+            f"time-optimal NLP on track {track.name!r}: IPOPT returned '{res.status}' and no "
+            "usable trajectory. Try: more iterations (TimeOptimalSettings.max_iter; on the "
+            "command line --max-iter), or another node spacing (--spacing)."
         )
     return PlanResult(
         res.trajectory,
@@ -187,7 +244,10 @@ def plan(
 
 
 __all__ = [
+    "GRIP_MARGIN",
+    "LARGE_PLAN_NODES",
     "METHODS",
+    "LargePlanWarning",
     "CurvatureResult",
     "CurvatureSettings",
     "PlanResult",

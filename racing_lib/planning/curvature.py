@@ -572,8 +572,9 @@ def solve_curvature(
             msg = (
                 f"curvature QP iteration {it}: {st.solver} (via cvxpy) returned status "
                 f"'{status}' on track {getattr(track, 'name', '?')!r}. Try: check that the track "
-                "is wide enough for the car, raise delta_max or the node spacing, or lower "
-                "speed_fraction."
+                "is wide enough for the car; another node spacing (plan(..., spacing=...); on "
+                "the command line --spacing 4); or, in CurvatureSettings, a larger delta_max or "
+                "a lower speed_fraction."
             )
             if raise_on_failure:
                 raise PlanningError(msg)

@@ -405,6 +405,23 @@ def _initial_guess(
     return z, kind
 
 
+def _failure_advice(kind: str, st: TimeOptimalSettings) -> str:
+    """What to try after a failed NLP: only knobs that exist, with their command-line flags."""
+    tips = []
+    if kind != "warm":
+        tips.append("the warm start from the curvature plan (start='warm', the CLI's default)")
+    tips.append(
+        f"more iterations (TimeOptimalSettings.max_iter, now {st.max_iter}; on the command "
+        f"line --max-iter {2 * st.max_iter})"
+    )
+    tips.append(
+        f"another node spacing (plan(..., spacing=...), now {st.spacing:g} m; on the command "
+        "line --spacing 2 or --spacing 4)"
+    )
+    tips.append("a check of the friction coefficient mu of the parameter set")
+    return "; ".join(tips)
+
+
 def trapezoid_lap_time(inv_sdot: Any, grid: Any) -> Any:
     """Lap time (s) from the nodes' 1/s_dot (s/m), by the trapezoid rule on the periodic grid.
 
@@ -581,9 +598,8 @@ def solve_time_optimal(
     if not success and raise_on_failure:
         raise PlanningError(
             f"time-optimal NLP on track {getattr(track, 'name', '?')!r}: IPOPT returned "
-            f"'{status}' after {sum(iters)} iterations ({kind} start). Try: warm start from the "
-            "curvature plan (start='warm'), increase max_iter, check the friction coefficient and "
-            "the pedal map, or use a finer grid (smaller spacing)."
+            f"'{status}' after {sum(iters)} iterations ({kind} start). Try: "
+            f"{_failure_advice(kind, st)}."
         )
     traj = None
     lap_time = float("nan")
