@@ -53,6 +53,7 @@ import numpy as np
 from racing_lib.control.base import Command
 from racing_lib.control.mpc_qp import QPData, QPSettings, QPShape, QPSolution, TrackingQP
 from racing_lib.errors import ControlError
+from racing_lib.jit import compile_function
 from racing_lib.model import NU, NX, U, X, discrete_linearization
 
 log = logging.getLogger(__name__)
@@ -172,8 +173,9 @@ class MPCSettings:
         below about 8 m/s (|lambda dt| > 2.8), which turns a slow car's QP into nonsense; 2 steps
         keep it stable down to about 4 m/s, 4 steps to about 2 m/s.
     jit : bool
-        Compile the linearization with the system C compiler (once per process and parameter
-        set, about a second): about 0.15 ms instead of 1 ms per step. Falls back to the
+        Compile the linearization with the system C compiler (about a second, once per parameter
+        set: the build is cached on disk, :mod:`racing_lib.jit`): about 0.15 ms instead of 1 ms
+        per step. Falls back to the
         interpreter, with a warning, when no compiler works.
     qp : QPSettings
         Settings of the OSQP fast path.
@@ -327,9 +329,9 @@ def _substep_linearization(
 
     Same contract as :func:`racing_lib.model.discrete_linearization`, whose single RK4 step of
     0.1 s is unstable at low speed. With ``jit`` the Function is compiled to machine code by the
-    system C compiler (about 1-4 s, once per process and parameter set), which makes it about
-    eight times faster than CasADi's interpreter; without a compiler it falls back to the
-    interpreter with a warning.
+    system C compiler (about 1-4 s, once per parameter set: :mod:`racing_lib.jit` caches the
+    build on disk by the hash of its code), which makes it about eight times faster than CasADi's
+    interpreter; without a compiler it falls back to the interpreter with a warning.
     """
     import casadi as ca
 
@@ -344,53 +346,16 @@ def _substep_linearization(
     A = ca.jacobian(x, xi)
     B = ca.jacobian(x, u)
     d = x - ca.mtimes(A, xi) - ca.mtimes(B, u)
-    args = ([xi, u, kappa, theta], [A, B, d])
+    fn = ca.Function("racing_lib_mpc_lin", [xi, u, kappa, theta], [A, B, d])
     if jit:
-        try:
-            return ca.Function(
-                "racing_lib_mpc_lin",
-                *args,
-                {
-                    "jit": True,
-                    "compiler": "shell",
-                    "jit_name": "racing_lib_mpc_lin",
-                    "jit_temp_suffix": True,
-                    "jit_options": {"flags": ["-O1"], "verbose": False, "directory": _jit_dir()},
-                },
-            )
-        except RuntimeError as exc:
-            log.warning(
-                "compiling the MPC linearization failed (%s); using CasADi's interpreter "
-                "(slower). Install a C compiler or pass MPCSettings(jit=False).",
-                str(exc).splitlines()[0],
-            )
-    return ca.Function("lin_rk4_substeps", *args)
-
-
-@functools.cache
-def _jit_dir() -> str:
-    """The directory for compiled CasADi code: one per user, reused by every process.
-
-    CasADi removes its files when a Function is destroyed (late in interpreter shutdown, so the
-    directory itself cannot be removed then), and ``jit_temp_suffix`` keeps the names of
-    concurrent processes apart. One shared directory therefore stays empty between runs, where a
-    fresh directory per process would leave one behind for every test run, notebook kernel and
-    tuning worker. If the name is taken by something that is not our own private directory, a
-    fresh one is used instead.
-    """
-    import os
-    import stat
-    import tempfile
-
-    path = os.path.join(tempfile.gettempdir(), f"racing_lib_jit_{os.getuid()}")
-    try:
-        os.makedirs(path, mode=0o700, exist_ok=True)
-        info = os.lstat(path)
-        if stat.S_ISDIR(info.st_mode) and info.st_uid == os.getuid() and info.st_mode & 0o077 == 0:
-            return path
-    except OSError:
-        pass
-    return tempfile.mkdtemp(prefix="racing_lib_jit_")
+        compiled = compile_function(fn)
+        if compiled is not None:
+            return compiled
+        log.warning(
+            "compiling the MPC linearization failed; using CasADi's interpreter (slower). "
+            "Install a C compiler (cc) or pass MPCSettings(jit=False)."
+        )
+    return fn
 
 
 def _continuous_linearization(params: Any, options: Any) -> Any:
