@@ -73,6 +73,7 @@ from racing_lib.errors import ControlError, PlanningError, RacingLibError, Track
 from racing_lib.experiment import LapMetrics, LapSpec, drive_lap, run_trials, summarize
 from racing_lib.io import atomic_write_text, jsonable
 from racing_lib.planning.trajectory import Trajectory
+from racing_lib.provenance import environment
 from racing_lib.track import Track, load_track
 from racing_lib.tuning import (
     MPC_WEIGHT_NAMES,
@@ -96,12 +97,15 @@ __all__ = [
     "run_ablation",
     "select_rows",
     "shipped_table",
+    "shipped_table_header",
     "stale_rows",
     "table_records",
 ]
 
-#: Version of the row and table files; bumping it invalidates every cached row.
+#: Version of the row files; bumping it invalidates every cached row.
 FORMAT = 1
+#: Version of the table file: 2 added the provenance header and a checksum per row.
+TABLE_FORMAT = 2
 #: The cache folder used when none is given, relative to the working directory.
 DEFAULT_OUT = "runs/ablation"
 #: Seeded trials per row (the paper's ten).
@@ -716,6 +720,7 @@ def run_ablation(
     progress: bool = True,
     log: Callable[[str], None] | None = None,
     on_row: Callable[[dict[str, Any], bool], None] | None = None,
+    cached_only: bool = False,
 ) -> list[dict[str, Any]]:
     """Compute rows of the tables (or reuse them from the cache folder).
 
@@ -752,6 +757,8 @@ def run_ablation(
         Receives one line of text per stage (planning, driving, reused).
     on_row : callable, optional
         Called as ``on_row(row, reused)`` after each row is finished or reused.
+    cached_only : bool
+        Only look: return the rows found in ``out_dir`` with a matching key, compute nothing.
 
     Returns
     -------
@@ -801,7 +808,9 @@ def run_ablation(
     from tqdm.auto import tqdm
 
     results: list[dict[str, Any]] = []
-    bar = tqdm(total=len(selected), desc="ablation", unit="row", disable=not progress)
+    bar = tqdm(
+        total=len(selected), desc="ablation", unit="row", disable=not progress or cached_only
+    )
     try:
         for row in selected:
             trk = track_objs[row.track]
@@ -817,6 +826,9 @@ def run_ablation(
                 results.append(cached)
                 if on_row is not None:
                     on_row(cached, True)
+                bar.update(1)
+                continue
+            if cached_only:
                 bar.update(1)
                 continue
             traj, plan_info = _get_plan(row, trk, spacing, folder, memo, say, code)
@@ -931,7 +943,11 @@ def table_records(rows: Iterable[Mapping[str, Any]]) -> list[dict[str, str]]:
     return out
 
 
-def format_table(rows: Iterable[Mapping[str, Any]], markdown: bool = False) -> str:
+def format_table(
+    rows: Iterable[Mapping[str, Any]],
+    markdown: bool = False,
+    sources: Sequence[str] | None = None,
+) -> str:
     """The table as text (aligned columns) or as a Markdown table (for a notebook).
 
     Parameters
@@ -940,8 +956,12 @@ def format_table(rows: Iterable[Mapping[str, Any]], markdown: bool = False) -> s
         Rows of :func:`run_ablation` or :func:`shipped_table`.
     markdown : bool
         Markdown table (``IPython.display.Markdown`` renders it) instead of plain text.
+    sources : sequence of str, optional
+        Where each row comes from (``'shipped'``, ``'recomputed'``): an extra last column.
     """
     records = table_records(rows)
+    if sources is not None:
+        records = [{**r, "source": src} for r, src in zip(records, sources, strict=True)]
     if not records:
         return "(no rows)"
     cols = list(records[0])
@@ -984,7 +1004,42 @@ def load_table(path: str | os.PathLike[str]) -> dict[str, Any]:
             f"{os.fspath(path)!r} is not an ablation table (no 'rows'); regenerate it with "
             "racing_lib.ablation.generate_ablation_table()."
         )
+    if int(data.get("format", 0)) < TABLE_FORMAT:
+        raise RacingLibError(
+            f"the ablation table {os.fspath(path)!r} has format {data.get('format')}, from before "
+            "tables recorded their provenance and row checksums; regenerate it with "
+            "racing_lib.ablation.generate_ablation_table()."
+        )
+    for row in data["rows"]:
+        if not isinstance(row, dict) or row.get("sha256") != _row_digest(row):
+            name = row.get("name", "?") if isinstance(row, dict) else "?"
+            raise RacingLibError(
+                f"row {name!r} of the ablation table {os.fspath(path)!r} fails its checksum: "
+                "its numbers were changed after the table was made, so none of them can be "
+                "trusted; restore the file (git checkout) or recompute the row with "
+                f"`racing-lib ablation --recompute {name}`."
+            )
     return data
+
+
+def shipped_table_header() -> dict[str, Any]:
+    """The shipped table's header: format, date, trials, wall time and ``provenance`` (the
+    machine, BLAS kernel and package versions that made it, see
+    :func:`racing_lib.provenance.environment`)."""
+    data = _read_shipped()
+    return {k: v for k, v in data.items() if k != "rows"}
+
+
+def _read_shipped() -> dict[str, Any]:
+    ref = resources.files("racing_lib").joinpath("data", SHIPPED_TABLE_FILE)
+    if not ref.is_file():
+        raise RacingLibError(
+            f"racing_lib/data/{SHIPPED_TABLE_FILE} is not shipped yet; compute it with "
+            "racing_lib.ablation.generate_ablation_table(workers=2), or run rows with "
+            "run_ablation()."
+        )
+    with resources.as_file(ref) as path:
+        return load_table(path)
 
 
 def shipped_table() -> list[dict[str, Any]]:
@@ -998,15 +1053,7 @@ def shipped_table() -> list[dict[str, Any]]:
     RacingLibError
         No table is shipped yet (make it with :func:`generate_ablation_table`).
     """
-    ref = resources.files("racing_lib").joinpath("data", SHIPPED_TABLE_FILE)
-    if not ref.is_file():
-        raise RacingLibError(
-            f"racing_lib/data/{SHIPPED_TABLE_FILE} is not shipped yet; compute it with "
-            "racing_lib.ablation.generate_ablation_table(workers=2), or run rows with "
-            "run_ablation()."
-        )
-    with resources.as_file(ref) as path:
-        return load_table(path)["rows"]
+    return _read_shipped()["rows"]
 
 
 def stale_rows(
@@ -1036,10 +1083,22 @@ def stale_rows(
     return stale
 
 
+def _row_digest(row: Mapping[str, Any]) -> str:
+    """SHA-256 of a row's JSON (its own ``sha256`` field left out)."""
+    return hashlib.sha256(
+        _compact_json({k: v for k, v in row.items() if k != "sha256"}).encode("utf-8")
+    ).hexdigest()
+
+
 def _table_text(header: Mapping[str, Any], rows: Sequence[Mapping[str, Any]]) -> str:
-    """JSON with one row per line: small diffs when a row changes, still one JSON object."""
+    """JSON with one row per line: small diffs when a row changes, still one JSON object.
+
+    Each row carries the checksum of its own numbers, so that :func:`load_table` refuses a row
+    edited by hand instead of showing it.
+    """
     head = ",\n".join(f"{json.dumps(k)}: {json.dumps(v)}" for k, v in sorted(header.items()))
-    body = ",\n".join(_compact_json(r) for r in rows)
+    signed = [{**r, "sha256": _row_digest(r)} for r in rows]
+    body = ",\n".join(_compact_json(r) for r in signed)
     return "{\n" + head + ',\n"rows": [\n' + body + "\n]\n}\n"
 
 
@@ -1084,9 +1143,11 @@ def generate_ablation_table(
         )
     tic = time.perf_counter()
     rows = run_ablation(out_dir=out_dir, workers=workers, progress=progress, **kwargs)
+    env = environment()
     header = {
-        "format": FORMAT,
-        "created_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+        "format": TABLE_FORMAT,
+        "created_utc": env["created_utc"],
+        "provenance": env,
         "fast_mode": fast_mode(),
         "trials": max((int(r["trials"]) for r in rows), default=0),
         "workers": workers,

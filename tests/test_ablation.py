@@ -288,7 +288,9 @@ def test_generate_writes_a_table_that_loads_back(table, tracks, tmp_path, monkey
         progress=False,
     )  # fmt: skip
     data = load_table(target)
-    assert data["rows"] == rows and data["fast_mode"] is True and data["trials"] == 1
+    assert [{k: v for k, v in r.items() if k != "sha256"} for r in data["rows"]] == rows
+    assert data["fast_mode"] is True and data["trials"] == 1
+    assert data["provenance"]["packages"]["casadi"] != "not installed"
     assert stale_rows(data["rows"], tracks=tracks) == []
     monkeypatch.setattr(ablation, "tuned_weights", lambda cfg: {"w_ey": 3.0})
     assert stale_rows(data["rows"], tracks=tracks) == ALL_ROWS  # every row's weights changed
@@ -307,8 +309,101 @@ def test_the_shipped_table_is_full_and_small_or_says_how_to_make_it():
     assert path.stat().st_size < 1_000_000
 
 
+def test_a_hand_edited_row_of_a_table_is_refused(table, tmp_path):
+    _, rows = table
+    path = tmp_path / "table.json"
+    path.write_text(ablation._table_text({"format": ablation.TABLE_FORMAT}, rows))
+    assert len(load_table(path)["rows"]) == len(rows)
+    edited = json.loads(path.read_text())
+    edited["rows"][0]["lap_time_mean_s"] -= 0.5  # a better lap time, typed in
+    path.write_text(json.dumps(edited))
+    with pytest.raises(RacingLibError, match="row 'main' .* fails its checksum"):
+        load_table(path)
+
+
+def test_a_table_without_provenance_and_checksums_is_refused(table, tmp_path):
+    _, rows = table
+    path = tmp_path / "old.json"
+    path.write_text(json.dumps({"format": 1, "rows": rows}))
+    with pytest.raises(RacingLibError, match="regenerate"):
+        load_table(path)
+
+
+def test_the_comparison_passes_the_same_laps_and_fails_a_lap_that_moved(table):
+    from racing_lib.ablation_check import compare_rows, format_checks
+
+    _, rows = table
+    row = rows[0]
+    assert all(c.ok for c in compare_rows(row, row))
+    slower = json.loads(json.dumps(row))
+    for m in slower["trial_metrics"]:
+        m["lap_time_s"] += 1.0  # every lap a second slower: far beyond the spread of the laps
+    checks = compare_rows(row, slower)
+    moved = [c.quantity for c in checks if not c.ok]
+    assert moved == ["closed-loop lap, mean [s]"]
+    assert "MOVED" in format_checks(checks)
+    replanned = {**row, "planned_lap_time_s": row["planned_lap_time_s"] * 1.01}
+    assert [c.quantity for c in compare_rows(row, replanned) if not c.ok] == ["planned lap [s]"]
+
+
+@pytest.mark.slow
+def test_the_main_row_recomputed_here_matches_the_shipped_one(tmp_path, capsys):
+    """CI recomputes the paper's main row with its ten seeds and compares it with the shipped
+    row within the statistical tolerances of racing_lib.ablation_check."""
+    from racing_lib.ablation_check import compare_rows, format_checks
+
+    shipped = {r["name"]: r for r in shipped_table()}["main"]
+    logging.disable(logging.WARNING)
+    try:
+        (row,) = run_ablation(
+            ["main"], trials=len(shipped["seeds"]), seed=shipped["seeds"][0],
+            out_dir=tmp_path, workers=2, progress=False,
+        )  # fmt: skip
+    finally:
+        logging.disable(logging.NOTSET)
+    checks = compare_rows(shipped, row)
+    report = format_checks(checks)
+    with capsys.disabled():
+        print(f"\nthe main row recomputed ({len(row['seeds'])} seeds) against the shipped one:")
+        print(report)
+    assert all(c.ok for c in checks), report
+
+
 # --------------------------------------------------------------------------------------------------
 # The command line
+
+
+def test_cli_shows_the_shipped_table_at_once_in_an_empty_folder(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    Calls(monkeypatch, "_trial", refuse=True)
+    Calls(monkeypatch, "_get_plan", refuse=True)
+    assert main(["ablation", "--json"]) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert [r["name"] for r in report["rows"]] == ALL_ROWS
+    assert {r["source"] for r in report["rows"]} == {"shipped"}
+    made = report["shipped_provenance"]
+    assert made["packages"]["casadi"] and made["cpu_count"] >= 1 and made["blas"]
+    assert report["checks"] == [] and not any(tmp_path.iterdir())
+    assert main(["ablation", "--rows", "main,decoupled"]) == 0
+    text = capsys.readouterr().out
+    assert "shipped rows: made" in text and text.count("shipped") >= 3
+
+
+def test_cli_recompute_marks_the_row_and_check_fails_on_numbers_that_moved(
+    tracks, monkeypatch, capsys, tmp_path
+):
+    out = tmp_path / "cache"
+    monkeypatch.setattr(ablation, "load_track", lambda name: tracks[name])
+    args = ["ablation", "--rows", "main,decoupled", "--recompute", "main", "--trials", "1",
+            "--spacing", str(SPACING), "--out", str(out)]  # fmt: skip
+    assert main([*args, "--json"]) == 0  # the coarse oval's row differs: shown, not an error
+    report = json.loads(capsys.readouterr().out)
+    assert [r["source"] for r in report["rows"]] == ["recomputed", "shipped"]
+    assert report["this_machine"]["packages"]["numpy"]
+    assert any(not c["ok"] for c in report["checks"])
+    assert main([*args, "--check"]) == 1
+    captured = capsys.readouterr()
+    assert "MOVED" in captured.out and "moved beyond tolerance" in captured.err
 
 
 def test_cli_json_prints_one_object_with_the_rows(table, tracks, monkeypatch, capsys):
@@ -321,8 +416,9 @@ def test_cli_json_prints_one_object_with_the_rows(table, tracks, monkeypatch, ca
     )  # fmt: skip
     captured = capsys.readouterr()
     report = json.loads(captured.out)  # the whole of stdout is one JSON object
-    assert code == 0 and set(report) == {"rows"}
+    assert code == 0 and {"rows", "checks", "shipped_provenance"} <= set(report)
     assert [r["name"] for r in report["rows"]] == ALL_ROWS[-3:-1]  # the shortcut's rows
+    assert {r["source"] for r in report["rows"]} == {"recomputed"}  # found in --out
     for r in report["rows"]:
         assert DESIGN_FIELDS <= set(r) and "profile" not in r
     assert report["rows"][0]["lap_time_mean_s"] == rows[-3]["lap_time_mean_s"]
