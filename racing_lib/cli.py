@@ -11,7 +11,9 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import sys
+import tempfile
 from collections.abc import Sequence
 from pathlib import Path as FilePath
 from typing import Any
@@ -97,11 +99,23 @@ def _model_options(args: argparse.Namespace):
     )
 
 
+def _plan_kwargs(args: argparse.Namespace) -> dict[str, Any]:
+    """The planner knobs given on the command line (``--spacing``, ``--max-iter``)."""
+    kwargs: dict[str, Any] = {"report": _say}
+    if args.spacing is not None:
+        kwargs["spacing"] = args.spacing
+    if args.max_iter is not None:
+        from racing_lib.planning import TimeOptimalSettings
+
+        kwargs["time_optimal_settings"] = TimeOptimalSettings(max_iter=args.max_iter)
+    return kwargs
+
+
 def _make_plan(args: argparse.Namespace, track):
-    """Plan ``track`` with the method and model options on the command line."""
+    """Plan ``track`` with the method, model options and knobs on the command line."""
     from racing_lib.planning import plan
 
-    return plan(track, method=args.method, options=_model_options(args))
+    return plan(track, method=args.method, options=_model_options(args), **_plan_kwargs(args))
 
 
 def cmd_plan(args: argparse.Namespace) -> int:
@@ -150,6 +164,7 @@ def cmd_lap(args: argparse.Namespace) -> int:
 
     result = race(
         args.track,
+        plan_kwargs=_plan_kwargs(args),
         method=args.method,
         controller=args.controller,
         seed=args.seed,
@@ -195,14 +210,14 @@ def _save_lap_outputs(out_dir: FilePath, track, trajectory, results, report) -> 
     import matplotlib.pyplot as plt
 
     from racing_lib import plotting
-    from racing_lib.io import atomic_write_json
+    from racing_lib.io import atomic_savefig, atomic_write_json
 
     plotting.set_style()
     out_dir.mkdir(parents=True, exist_ok=True)
     trajectory.save_csv(str(out_dir / "plan.csv"))
     log = results[0].log
     ax = plotting.plot_track(track, {"plan": trajectory, "closed loop": log})
-    ax.figure.savefig(out_dir / "track.png", dpi=130, bbox_inches="tight")
+    atomic_savefig(ax.figure, out_dir / "track.png", dpi=130, bbox_inches="tight")
     plt.close(ax.figure)
     fig, axes = plt.subplots(2, 1, figsize=(10, 5.5), sharex=True)
     lap = log.in_lap
@@ -213,14 +228,14 @@ def _save_lap_outputs(out_dir: FilePath, track, trajectory, results, report) -> 
         ylabel="v_x [m/s]",
     )
     plotting.plot_profiles(log.s_ref[lap], {"e_y": log.ey[lap]}, ax=axes[1], ylabel="e_y [m]")
-    fig.savefig(out_dir / "profiles.png", dpi=130, bbox_inches="tight")
+    atomic_savefig(fig, out_dir / "profiles.png", dpi=130, bbox_inches="tight")
     plt.close(fig)
     atomic_write_json(out_dir / "summary.json", _clean(report))
 
 
 def cmd_tune(args: argparse.Namespace) -> int:
     """Tune the coupled MPC's weights with CMA-ES on the time-optimal plan of a track."""
-    from racing_lib.io import atomic_write_json
+    from racing_lib.io import atomic_write_json, jsonable
     from racing_lib.track import load_track
     from racing_lib.tuning import TuningSettings, config_spec, tune_weights
 
@@ -228,7 +243,7 @@ def cmd_tune(args: argparse.Namespace) -> int:
     _say(f"planning {track.name} time-optimally ...")
     spec = config_spec("main", track)
     out = FilePath(args.out)
-    work = out.with_name(out.stem + "_checkpoints")
+    work = _checkpoint_dir(out)
     _say(f"tuning with CMA-ES: {args.budget} generations, {args.workers} workers; "
          f"checkpoints in {work}/ (rerun the same command to resume)")  # fmt: skip
     result = tune_weights(
@@ -242,14 +257,16 @@ def cmd_tune(args: argparse.Namespace) -> int:
     )
     atomic_write_json(
         out,
-        {
-            "track": track.name,
-            "configuration": "main",
-            "best_objective": result.best_objective,
-            "generations": result.generations,
-            "evaluations": result.evaluations,
-            "weights": result.best_weights,
-        },
+        jsonable(
+            {
+                "track": track.name,
+                "configuration": "main",
+                "best_objective": result.best_objective,
+                "generations": result.generations,
+                "evaluations": result.evaluations,
+                "weights": result.best_weights,
+            }
+        ),
     )
     _say(f"best objective {result.best_objective:.3f} after {result.evaluations} laps")
     print(json.dumps(_clean(result.best_weights), indent=2))
@@ -260,28 +277,205 @@ def cmd_tune(args: argparse.Namespace) -> int:
 # ablation
 
 
-def cmd_ablation(args: argparse.Namespace) -> int:
-    """The paper's Table I and Table II on the simulated car (cached rows are reused)."""
-    from racing_lib.ablation import DEFAULT_OUT, format_table, run_ablation
+def _row_names(text: str | None) -> list[str] | None:
+    return [n.strip() for n in text.split(",") if n.strip()] if text else None
 
-    names = [n.strip() for n in args.rows.split(",") if n.strip()] if args.rows else None
-    rows = run_ablation(
-        names,
-        track=args.track,
-        trials=args.ablation_trials,
-        seed=args.seed,
-        out_dir=args.out or DEFAULT_OUT,
-        workers=args.workers,
-        spacing=args.spacing,
-        progress=False,
-        log=_say,
-    )
-    if args.json:
-        # The per-row files in --out hold the profiles; stdout stays a table of numbers.
-        _emit_json({"rows": [{k: v for k, v in r.items() if k != "profile"} for r in rows]})
+
+def cmd_ablation(args: argparse.Namespace) -> int:
+    """The paper's Table I and Table II on the simulated car.
+
+    Shows the shipped table at once; rows recomputed with ``--recompute`` (or found recomputed in
+    the ``--out`` cache folder) replace their shipped versions and are marked as such.
+    """
+    from racing_lib import ablation
+    from racing_lib.ablation_check import compare_rows, format_checks
+    from racing_lib.provenance import describe, environment
+
+    shown = [r.name for r in ablation.select_rows(_row_names(args.rows), args.track)]
+    # Unknown names are refused here, before any work.
+    asked = _row_names(args.recompute) or []
+    if asked == ["all"]:
+        recompute = shown
     else:
-        print(format_table(rows))
+        recompute = [r.name for r in ablation.select_rows(asked, args.track)] if asked else []
+    try:
+        shipped = {r["name"]: r for r in ablation.shipped_table()}
+        header = ablation.shipped_table_header()
+    except RacingLibError as exc:
+        if not recompute:
+            raise
+        _say(f"note: {exc}")
+        shipped, header = {}, {}
+    common = {
+        "track": args.track,
+        "trials": args.ablation_trials,
+        "seed": args.seed,
+        "out_dir": args.out or ablation.DEFAULT_OUT,
+        "workers": args.workers,
+        "spacing": args.spacing,
+        "progress": False,
+        "log": _say,
+    }
+    todo = [n for n in shown if n in recompute]
+    fresh = {r["name"]: r for r in ablation.run_ablation(todo, **common)} if todo else {}
+    if FilePath(common["out_dir"]).is_dir():
+        # Rows recomputed by an earlier run with these settings count as recomputed too.
+        rest = [n for n in shown if n not in fresh]
+        for r in ablation.run_ablation(rest, cached_only=True, **common):
+            fresh[r["name"]] = r
+    rows, sources, checks = [], [], []
+    for name in shown:
+        if name in fresh:
+            rows.append(fresh[name])
+            sources.append("recomputed")
+            if name in shipped:
+                checks += compare_rows(shipped[name], fresh[name])
+        elif name in shipped:
+            rows.append(shipped[name])
+            sources.append("shipped")
+        else:
+            raise RacingLibError(
+                f"row {name!r} is neither shipped nor in {common['out_dir']}; compute it with "
+                f"`racing-lib ablation --recompute {name}`."
+            )
+    moved = [c for c in checks if not c.ok]
+    made_by = header.get("provenance")
+    if args.json:
+        _emit_json(
+            {
+                "rows": [
+                    {**{k: v for k, v in r.items() if k != "profile"}, "source": src}
+                    for r, src in zip(rows, sources, strict=True)
+                ],
+                "shipped_provenance": made_by,
+                "this_machine": environment() if fresh else None,
+                "checks": [{**c.__dict__, "difference": c.difference, "ok": c.ok} for c in checks],
+            }
+        )
+    else:
+        print(ablation.format_table(rows, sources=sources))
+        if made_by:
+            print(f"shipped rows: {describe(made_by)}")
+        if fresh:
+            print(f"recomputed rows: {describe(environment())}")
+        if checks:
+            print("\nrecomputed against shipped (tolerances: racing_lib.ablation_check):")
+            print(format_checks(checks))
+    if moved and args.check:
+        _say(f"error: {len(moved)} number(s) moved beyond tolerance (MOVED above).")
+        return 1
     return 0
+
+
+# --------------------------------------------------------------------------------------------------
+# checks made before any work: a refusal after minutes of planning would lose that work
+
+
+def _nearest_existing(path: FilePath) -> FilePath:
+    """The path itself or its closest ancestor that exists."""
+    here = path.absolute()
+    while not here.exists() and here != here.parent:
+        here = here.parent
+    return here
+
+
+def _check_writable_dir(folder: FilePath, flag: str, target: FilePath) -> None:
+    """``folder`` is, or can be created as, a folder we may write in (nothing is created)."""
+    base = _nearest_existing(folder)
+    if not base.is_dir():
+        raise RacingLibError(
+            f"{flag} {target}: {base} is a file, so no folder can be made below it; choose "
+            "another place."
+        )
+    if not (os.access(base, os.W_OK | os.X_OK) and _can_create_in(base)):
+        raise RacingLibError(
+            f"{flag} {target}: cannot write in {base} (permission denied or a read-only file "
+            "system); choose a folder you can write to."
+        )
+
+
+def _can_create_in(folder: FilePath) -> bool:
+    """Whether a file can be created in ``folder``: tried with a temporary file, removed at once.
+
+    ``os.access`` alone says yes to root everywhere, even where the kernel refuses files (such as
+    /proc), so the only sure test is to try.
+    """
+    try:
+        fd, probe = tempfile.mkstemp(prefix=".racing_lib_probe_", dir=folder)
+    except OSError:
+        return False
+    os.close(fd)
+    os.unlink(probe)
+    return True
+
+
+def check_output_file(value: str, flag: str = "--out") -> None:
+    """Refuse an output file that could not be written, before any work starts.
+
+    Raises
+    ------
+    RacingLibError
+        The place is a folder, lies below a file, or cannot be written.
+    """
+    target = FilePath(value)
+    if target.is_dir():
+        raise RacingLibError(f"{flag} {value}: that is a folder; give a file name, e.g. plan.csv.")
+    if target.exists() and not os.access(target, os.W_OK):
+        raise RacingLibError(f"{flag} {value}: the file exists and cannot be overwritten.")
+    _check_writable_dir(target.parent, flag, target)
+
+
+def check_output_dir(value: str, flag: str = "--out") -> None:
+    """Refuse an output folder that could not be made or written in, before any work starts."""
+    target = FilePath(value)
+    if target.exists() and not target.is_dir():
+        raise RacingLibError(f"{flag} {value}: that is a file, not a folder; choose a folder.")
+    _check_writable_dir(target, flag, target)
+
+
+def _at_least(value: int | None, low: int, flag: str, why: str = "") -> None:
+    if value is not None and value < low:
+        raise RacingLibError(f"{flag} must be at least {low}, got {value}{why}.")
+
+
+def check_arguments(args: argparse.Namespace) -> None:
+    """Every number and output place on the command line, checked before any work starts.
+
+    Raises
+    ------
+    RacingLibError
+        One line naming the flag, its value and the way out.
+    """
+    _at_least(getattr(args, "trials", None), 1, "--trials")
+    _at_least(getattr(args, "ablation_trials", None), 1, "--trials")
+    _at_least(getattr(args, "seed", None), 0, "--seed", " (seeds are whole numbers >= 0)")
+    _at_least(getattr(args, "budget", None), 1, "--budget", " (CMA-ES generations)")
+    _at_least(getattr(args, "workers", None), 1, "--workers", " (1 runs the laps in-process)")
+    _at_least(getattr(args, "max_iter", None), 1, "--max-iter")
+    spacing = getattr(args, "spacing", None)
+    if spacing is not None and not (math.isfinite(spacing) and 0.5 <= spacing <= 20.0):
+        raise RacingLibError(
+            f"--spacing must be a node spacing between 0.5 and 20 m, got {spacing} (the "
+            "planners are tuned for 3 m)."
+        )
+    out = getattr(args, "out", None)
+    if out:
+        if args.command in ("plan", "tune"):
+            check_output_file(out)
+        else:
+            check_output_dir(out)
+        if args.command == "tune":
+            check_output_dir(str(_checkpoint_dir(FilePath(out))), "--out (its checkpoints)")
+    plan_file = getattr(args, "plan", None)
+    if plan_file and not FilePath(plan_file).is_file():
+        raise RacingLibError(
+            f"--plan {plan_file}: no such file; make one with `racing-lib plan --out {plan_file}`."
+        )
+
+
+def _checkpoint_dir(out: FilePath) -> FilePath:
+    """Where ``tune --out FILE`` keeps its checkpoints: a folder beside FILE."""
+    return out.with_name(out.stem + "_checkpoints")
 
 
 # --------------------------------------------------------------------------------------------------
@@ -310,6 +504,17 @@ def _add_model_flags(p: argparse.ArgumentParser) -> None:
     )
 
 
+def _add_planner_knobs(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--spacing", type=float, help="plan node spacing along the centerline in m (default 3)"
+    )
+    p.add_argument(
+        "--max-iter",
+        type=int,
+        help="IPOPT iteration limit of the time-optimal NLP (default 1000)",
+    )
+
+
 METHODS = ("centerline", "curvature", "time-optimal")
 CONTROLLERS = ("nominal", "coupled-mpc", "decoupled-mpc")
 
@@ -330,6 +535,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_track(p)
     p.add_argument("--method", choices=METHODS, default="time-optimal")
     _add_model_flags(p)
+    _add_planner_knobs(p)
     p.add_argument("--out", help="write the plan to this CSV file")
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     p.set_defaults(func=cmd_plan)
@@ -340,6 +546,7 @@ def build_parser() -> argparse.ArgumentParser:
     group.add_argument("--plan", help="a plan CSV made by 'racing-lib plan --out'")
     group.add_argument("--method", choices=METHODS, default="time-optimal")
     _add_model_flags(p)
+    _add_planner_knobs(p)
     p.add_argument("--controller", choices=CONTROLLERS, default="coupled-mpc")
     p.add_argument(
         "--no-smooth-transition",
@@ -360,9 +567,21 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", default="tuned_weights.json", help="where to write the weights")
     p.set_defaults(func=cmd_tune)
 
-    p = sub.add_parser("ablation", help="the paper's Table I and II (cached rows are reused)")
+    p = sub.add_parser(
+        "ablation", help="the paper's Table I and II: the shipped table, or rows recomputed"
+    )
     p.add_argument("--track", help="only the rows of this track (expressway or shortcut)")
-    p.add_argument("--rows", help="comma-separated row names, e.g. main,no-drag (default: all)")
+    p.add_argument("--rows", help="comma-separated row names to show, e.g. main,no-drag")
+    p.add_argument(
+        "--recompute",
+        metavar="ROWS",
+        help="recompute these rows (comma-separated, or 'all'; cached rows in --out are reused)",
+    )
+    p.add_argument(
+        "--check",
+        action="store_true",
+        help="exit 1 if a recomputed row differs from the shipped one beyond tolerance",
+    )
     # Its own dest: the default (10, or 2 in fast mode) is decided by racing_lib.ablation.
     p.add_argument(
         "--trials",
@@ -386,9 +605,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``racing-lib`` console script."""
     parser = build_parser()
     args = parser.parse_args(argv)
-    if getattr(args, "trials", 1) < 1:
-        parser.error("--trials must be at least 1")
     try:
+        check_arguments(args)
         return int(args.func(args))
     except RacingLibError as exc:
         print(f"error: {exc}", file=sys.stderr)

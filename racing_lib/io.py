@@ -6,6 +6,7 @@ interrupted run leaves either the old file or the new one, never half of one.
 
 from __future__ import annotations
 
+import io
 import json
 import math
 import os
@@ -44,6 +45,18 @@ def atomic_write_text(path: str | os.PathLike[str], text: str) -> None:
 def atomic_write_json(path: str | os.PathLike[str], obj: Any) -> None:
     """Write ``obj`` as indented JSON to ``path`` atomically."""
     atomic_write_text(path, json.dumps(obj, indent=2, sort_keys=True) + "\n")
+
+
+def atomic_savefig(fig: Any, path: str | os.PathLike[str], **kwargs: Any) -> None:
+    """Save a matplotlib figure atomically: rendered in memory, then written as one file.
+
+    The format is the file's suffix (``.png``, ``.pdf``, ``.svg``); ``kwargs`` go to
+    ``fig.savefig`` (for example ``dpi``, ``bbox_inches``).
+    """
+    buf = io.BytesIO()
+    fmt = Path(path).suffix.lstrip(".") or "png"
+    fig.savefig(buf, format=fmt, **kwargs)
+    atomic_write_bytes(path, buf.getvalue())
 
 
 def jsonable(obj: Any) -> Any:

@@ -93,3 +93,20 @@ def test_plan_json_has_the_documented_fields(capsys, tmp_path):
     capsys.readouterr()
     assert main(["lap", "--plan", str(out), "--controller", "nominal", "--json"]) == 2
     assert "oval" in capsys.readouterr().err
+
+
+def test_plan_spacing_flag_sets_the_node_spacing(capsys):
+    assert main(["plan", "--method", "centerline", "--spacing", "5", "--json"]) == 0
+    fields = json.loads(capsys.readouterr().out)
+    assert fields["nodes"] == pytest.approx(fields["length_m"] / 5.0, abs=2)
+
+
+@pytest.mark.slow
+def test_a_failed_nlp_names_ipopt_its_status_and_only_knobs_that_exist(capsys):
+    code = main(["plan", "--track", "shortcut", "--max-iter", "3", "--json"])
+    captured = capsys.readouterr()
+    assert code == 2 and captured.out == ""
+    line = captured.err.strip().splitlines()[-1]
+    assert line.startswith("error: time-optimal NLP") and "IPOPT returned" in line
+    assert "--max-iter 6" in line and "--spacing" in line
+    assert "start='warm'" not in line  # the start was already warm: not suggested again
