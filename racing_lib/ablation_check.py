@@ -10,8 +10,10 @@ with the spread of the laps themselves, not digit by digit:
 * each per-lap mean (lap time, v_x MAE, e_y MAE) within ``Z`` standard errors of the difference
   of two means, ``Z * sqrt(sd_a**2 / n_a + sd_b**2 / n_b)``, with a floor of :data:`MEAN_RTOL`
   of the value (so that two identical sets of laps, whose spread may be tiny, still compare);
-* the completed laps within :data:`COMPLETED_SLACK`, and the wall contacts within
-  ``Z * sqrt(c_a + c_b) + 1`` (counts are roughly Poisson).
+* the share of completed laps within :data:`COMPLETED_SLACK` laps of the smaller row, and the
+  wall contacts per lap within ``Z * sqrt(c_a / n_a**2 + c_b / n_b**2) + 1 / min(n_a, n_b)``
+  (counts are roughly Poisson); rows of different trial counts therefore compare;
+* a row of one lap borrows the other row's lap-to-lap spread.
 
 On the machine that made the table, with the same code and seeds, every difference is zero.
 Used by the tests (CI recomputes the ``main`` row) and by ``racing-lib ablation --recompute``.
@@ -85,11 +87,17 @@ def _sd(values: Sequence[float]) -> float:
 def _mean_check(
     name: str, quantity: str, a: Mapping[str, Any], b: Mapping[str, Any], key: str
 ) -> Check:
-    """Compare the per-lap means of ``key`` (over the trials) of two rows."""
+    """Compare the per-lap means of ``key`` (over the trials) of two rows.
+
+    A side with a single lap has no spread of its own; it borrows the other side's.
+    """
     la, lb = _per_lap(a, key), _per_lap(b, key)
     ma = sum(la) / len(la) if la else None
     mb = sum(lb) / len(lb) if lb else None
-    se = math.sqrt(_sd(la) ** 2 / max(len(la), 1) + _sd(lb) ** 2 / max(len(lb), 1))
+    sa, sb = _sd(la), _sd(lb)
+    sa = sa if len(la) > 1 else sb
+    sb = sb if len(lb) > 1 else sa
+    se = math.sqrt(sa**2 / max(len(la), 1) + sb**2 / max(len(lb), 1))
     floor = MEAN_RTOL * abs(ma if ma is not None else (mb or 0.0))
     return Check(name, quantity, ma, mb, max(Z * se, floor))
 
@@ -105,6 +113,9 @@ def compare_rows(shipped: Mapping[str, Any], recomputed: Mapping[str, Any]) -> l
     name = str(shipped.get("name"))
     planned = float(shipped["planned_lap_time_s"])
     walls_a, walls_b = int(shipped["wall_contacts"]), int(recomputed["wall_contacts"])
+    # Counts as shares of the laps, so that rows of different trial counts compare.
+    n_a, n_b = max(int(shipped["trials"]), 1), max(int(recomputed["trials"]), 1)
+    fewer = min(n_a, n_b)
     return [
         Check(
             name,
@@ -118,17 +129,17 @@ def compare_rows(shipped: Mapping[str, Any], recomputed: Mapping[str, Any]) -> l
         _mean_check(name, "e_y MAE, mean of laps [m]", shipped, recomputed, "ey_mae_m"),
         Check(
             name,
-            "completed laps",
-            float(shipped["completed"]),
-            float(recomputed["completed"]),
-            float(COMPLETED_SLACK),
+            "completed, share of laps",
+            float(shipped["completed"]) / n_a,
+            float(recomputed["completed"]) / n_b,
+            COMPLETED_SLACK / fewer,
         ),
         Check(
             name,
-            "wall contacts (all laps)",
-            float(walls_a),
-            float(walls_b),
-            Z * math.sqrt(walls_a + walls_b) + 1.0,
+            "wall contacts per lap",
+            walls_a / n_a,
+            walls_b / n_b,
+            Z * math.sqrt(walls_a / n_a**2 + walls_b / n_b**2) + 1.0 / fewer,
         ),
     ]
 

@@ -294,18 +294,22 @@ def cmd_ablation(args: argparse.Namespace) -> int:
     shown = [r.name for r in ablation.select_rows(_row_names(args.rows), args.track)]
     # Unknown names are refused here, before any work.
     asked = _row_names(args.recompute) or []
-    if asked == ["all"]:
+    if "all" in asked:
         recompute = shown
     else:
         recompute = [r.name for r in ablation.select_rows(asked, args.track)] if asked else []
+    # A row asked to be recomputed is shown, whatever --rows says (in table order).
+    order = [r.name for r in ablation.ablation_rows()]
+    shown = [n for n in order if n in shown or n in recompute]
     try:
         shipped = {r["name"]: r for r in ablation.shipped_table()}
         header = ablation.shipped_table_header()
     except RacingLibError as exc:
         if not recompute:
             raise
-        _say(f"note: {exc}")
+        _say(f"note: {exc}; showing only the recomputed rows")
         shipped, header = {}, {}
+        shown = [n for n in shown if n in recompute]
     common = {
         "track": args.track,
         "trials": args.ablation_trials,
@@ -380,7 +384,8 @@ def _nearest_existing(path: FilePath) -> FilePath:
 
 
 def _check_writable_dir(folder: FilePath, flag: str, target: FilePath) -> None:
-    """``folder`` is, or can be created as, a folder we may write in (nothing is created)."""
+    """``folder`` is, or can be created as, a folder we may write in (nothing is left behind:
+    the test is a temporary file created and removed at once)."""
     base = _nearest_existing(folder)
     if not base.is_dir():
         raise RacingLibError(
@@ -417,16 +422,32 @@ def check_output_file(value: str, flag: str = "--out") -> None:
     RacingLibError
         The place is a folder, lies below a file, or cannot be written.
     """
-    target = FilePath(value)
-    if target.is_dir():
-        raise RacingLibError(f"{flag} {value}: that is a folder; give a file name, e.g. plan.csv.")
-    if target.exists() and not os.access(target, os.W_OK):
-        raise RacingLibError(f"{flag} {value}: the file exists and cannot be overwritten.")
-    _check_writable_dir(target.parent, flag, target)
+    _unreadable_place_is_an_error(_check_output_file, value, flag)
 
 
 def check_output_dir(value: str, flag: str = "--out") -> None:
     """Refuse an output folder that could not be made or written in, before any work starts."""
+    _unreadable_place_is_an_error(_check_output_dir, value, flag)
+
+
+def _unreadable_place_is_an_error(check, value: str, flag: str) -> None:
+    try:
+        check(value, flag)
+    except OSError as exc:  # a folder on the way that we may not even look into
+        raise RacingLibError(
+            f"{flag} {value}: cannot look there ({exc.strerror or exc}); choose a folder you can "
+            "write to."
+        ) from None
+
+
+def _check_output_file(value: str, flag: str) -> None:
+    target = FilePath(value)
+    if target.is_dir():
+        raise RacingLibError(f"{flag} {value}: that is a folder; give a file name, e.g. plan.csv.")
+    _check_writable_dir(target.parent, flag, target)
+
+
+def _check_output_dir(value: str, flag: str) -> None:
     target = FilePath(value)
     if target.exists() and not target.is_dir():
         raise RacingLibError(f"{flag} {value}: that is a file, not a folder; choose a folder.")
@@ -458,7 +479,16 @@ def check_arguments(args: argparse.Namespace) -> None:
             f"--spacing must be a node spacing between 0.5 and 20 m, got {spacing} (the "
             "planners are tuned for 3 m)."
         )
+    if getattr(args, "plan", None) and (args.spacing is not None or args.max_iter is not None):
+        raise RacingLibError(
+            "--spacing and --max-iter are planner settings, but --plan drives a plan made before; "
+            "give them to `racing-lib plan`, or drop --plan to plan here."
+        )
     out = getattr(args, "out", None)
+    if args.command == "ablation" and getattr(args, "recompute", None) and not out:
+        from racing_lib.ablation import DEFAULT_OUT
+
+        check_output_dir(DEFAULT_OUT, "--out (default)")
     if out:
         if args.command in ("plan", "tune"):
             check_output_file(out)
@@ -467,9 +497,14 @@ def check_arguments(args: argparse.Namespace) -> None:
         if args.command == "tune":
             check_output_dir(str(_checkpoint_dir(FilePath(out))), "--out (its checkpoints)")
     plan_file = getattr(args, "plan", None)
-    if plan_file and not FilePath(plan_file).is_file():
+    try:
+        found = bool(plan_file) and FilePath(plan_file).is_file()
+    except OSError:
+        found = False
+    if plan_file and not found:
         raise RacingLibError(
-            f"--plan {plan_file}: no such file; make one with `racing-lib plan --out {plan_file}`."
+            f"--plan {plan_file}: no such file (or not readable); make one with "
+            f"`racing-lib plan --out {plan_file}`."
         )
 
 

@@ -53,16 +53,22 @@ def compile_function(fn: Any) -> Any | None:
     ).hexdigest()[:16]
     folder = Path(cache_dir())
     library = folder / f"{name}_{key}.so"
-    if not library.exists():
+    for _attempt in range(2):  # another process may prune the build between our steps: retry
         try:
-            _build(code, library, compiler)
-        except (OSError, subprocess.CalledProcessError) as exc:
+            if not library.exists():
+                _build(code, library, compiler)
+            os.utime(library)  # most recently used: kept by the pruning below
+            loaded = ca.external(name, str(library))
+        except FileNotFoundError:
+            continue
+        except (OSError, RuntimeError, subprocess.CalledProcessError) as exc:
+            # No compiler, a folder mounted noexec, a damaged build: the caller falls back.
             detail = getattr(exc, "stderr", "") or str(exc)
             log.warning("compiling %s with %s failed: %s", name, compiler, detail.strip()[:300])
             return None
-    os.utime(library)  # most recently used: kept by the pruning below
-    _prune(folder, keep=library)
-    return ca.external(name, str(library))
+        _prune(folder, name, keep=library)
+        return loaded
+    return None
 
 
 def _build(code: str, library: Path, compiler: str) -> None:
@@ -86,12 +92,20 @@ def _build(code: str, library: Path, compiler: str) -> None:
                 os.unlink(leftover)
 
 
-def _prune(folder: Path, keep: Path) -> None:
-    """Remove the builds beyond :data:`MAX_BUILDS`, least recently used first.
+def _prune(folder: Path, name: str, keep: Path) -> None:
+    """Remove the builds of ``name`` beyond :data:`MAX_BUILDS`, least recently used first.
 
-    A process that has one of them loaded keeps using it: on POSIX a removed file stays mapped.
+    Builds in progress (``.build_*``) are never touched. A process that has a removed build
+    loaded keeps using it: on POSIX a removed file stays mapped.
     """
-    builds = sorted(folder.glob("*.so"), key=lambda p: p.stat().st_mtime, reverse=True)
+
+    def used(path: Path) -> float:
+        try:
+            return path.stat().st_mtime
+        except OSError:
+            return -1.0  # removed meanwhile by another process
+
+    builds = sorted(folder.glob(f"{name}_*.so"), key=used, reverse=True)
     for old in builds[MAX_BUILDS:]:
         if old != keep:
             try:
@@ -104,7 +118,8 @@ def _prune(folder: Path, keep: Path) -> None:
 def cache_dir() -> str:
     """The folder of compiled builds: one per user, private, reused by every process.
 
-    If the name is taken by something that is not our own private folder, a fresh one is used.
+    If the name is taken by something that is not our own private folder, a private folder
+    with a suffix is used instead (the same one by every process of this user).
     """
     path = os.path.join(tempfile.gettempdir(), f"racing_lib_jit_{os.getuid()}")
     try:
@@ -114,4 +129,14 @@ def cache_dir() -> str:
             return path
     except OSError:
         pass
+    for k in range(1, 100):
+        alt = f"{path}_{k}"
+        try:
+            os.makedirs(alt, mode=0o700, exist_ok=True)
+            info = os.lstat(alt)
+            if stat.S_ISDIR(info.st_mode) and info.st_uid == os.getuid():
+                if info.st_mode & 0o077 == 0:
+                    return alt
+        except OSError:
+            continue
     return tempfile.mkdtemp(prefix="racing_lib_jit_")

@@ -188,7 +188,12 @@ def thin_dense_rows(xy: np.ndarray, where: str) -> np.ndarray:
         TrackGeometryWarning,
         stacklevel=4,
     )
-    return np.arange(0, len(xy), keep_every)
+    keep = np.arange(0, len(xy), keep_every)
+    # The loop closes from the last kept row to row 0: drop a last row that would sit closer to
+    # row 0 than the others sit to each other.
+    while len(keep) > 8 and np.hypot(*(xy[keep[-1]] - xy[0])) < 0.5 * keep_every * spacing:
+        keep = keep[:-1]
+    return keep
 
 
 def _near(values: np.ndarray, centre: float, length: float, reach: float) -> np.ndarray:

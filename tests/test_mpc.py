@@ -528,9 +528,18 @@ def test_one_build_is_shared_by_processes_and_the_cache_stays_small(tmp_path):
         "_substep_linearization(identified_params(), ModelOptions(), 0.1, 2, jit=True)\n"
         "print(cache_dir(), sorted(os.listdir(cache_dir())))\n"
     )
+    work = tmp_path / "work"
+    work.mkdir()
+    # A private temporary folder: another run of the tests on this machine shares the real one.
+    env = {**os.environ, "TMPDIR": str(tmp_path)}
     runs = [
         subprocess.run(
-            [sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=tmp_path
+            [sys.executable, "-c", code],
+            capture_output=True,
+            text=True,
+            check=True,
+            cwd=work,
+            env=env,
         ).stdout.split(" ", 1)
         for _ in range(2)
     ]
@@ -540,7 +549,7 @@ def test_one_build_is_shared_by_processes_and_the_cache_stays_small(tmp_path):
     assert stat.S_ISDIR(info.st_mode) and info.st_mode & 0o077 == 0
     assert all(name.endswith(".so") for name in listing), listing  # no sources left behind
     assert len(listing) <= jit.MAX_BUILDS
-    assert not list(tmp_path.iterdir())  # nothing written in the working directory
+    assert not list(work.iterdir())  # nothing written in the working directory
 
 
 def test_the_build_cache_keeps_only_the_newest_builds(tmp_path, monkeypatch):
@@ -551,7 +560,31 @@ def test_the_build_cache_keeps_only_the_newest_builds(tmp_path, monkeypatch):
         f.write_bytes(b"")
         os.utime(f, (1000 + k, 1000 + k))
     keep = tmp_path / "old_0.so"
-    jit._prune(tmp_path, keep=keep)
+    jit._prune(tmp_path, "old", keep=keep)
     left = sorted(p.name for p in tmp_path.iterdir())
     assert len(left) == jit.MAX_BUILDS + 1 and "old_0.so" in left  # the one in use stays
     assert f"old_{jit.MAX_BUILDS + 2}.so" in left and "old_1.so" not in left
+
+
+def test_a_damaged_build_falls_back_to_the_interpreter(tmp_path, monkeypatch, caplog):
+    import casadi as ca
+
+    from racing_lib import jit
+
+    x = ca.SX.sym("x", 2)
+    fn = ca.Function("racing_lib_test_fn", [x], [ca.sin(x) * 2.0])
+    good, bad = tmp_path / "good", tmp_path / "bad"
+    good.mkdir()
+    bad.mkdir()
+    monkeypatch.setattr(jit, "cache_dir", lambda: str(good))
+    compiled = jit.compile_function(fn)
+    assert compiled is not None
+    np.testing.assert_allclose(np.asarray(compiled([0.3, 0.4])).ravel(), 2 * np.sin([0.3, 0.4]))
+    # The same build's name in another folder, holding something that is no library (never
+    # overwrite a loaded library in place: the process maps it).
+    (build,) = good.glob("racing_lib_test_fn_*.so")
+    (bad / build.name).write_bytes(b"not a shared library")
+    monkeypatch.setattr(jit, "cache_dir", lambda: str(bad))
+    with caplog.at_level("WARNING"):
+        assert jit.compile_function(fn) is None  # refused to load: the caller interprets
+    assert "failed" in caplog.text

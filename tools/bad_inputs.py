@@ -184,6 +184,11 @@ def cases(files: dict[str, Path]) -> list[Case]:
         Case("overlapping road", [*lap, "--track", f["track_overlap"]], "overlaps the road"),
         Case("binary track file", [*lap, "--track", f["track_binary"]], "cannot be read"),
         Case("missing plan file", ["lap", "--plan", "nope.csv"], "no such file"),
+        Case(
+            "planner knobs with a saved plan",
+            ["lap", "--plan", f["plan_lap_time_edited"], "--spacing", "4"],
+            "--plan drives a plan made before",
+        ),
         Case("plan cut at a row", ["lap", "--plan", f["plan_cut_at_row"]], "cut short"),
         Case("plan cut inside a row", ["lap", "--plan", f["plan_cut_mid_row"]], "data row 701"),
         Case("plan header only", ["lap", "--plan", f["plan_header_only"]], "no rows"),

@@ -297,10 +297,10 @@ class Trajectory:
     def load_csv(cls, path: str | os.PathLike[str], track: Any = None) -> Trajectory:
         """Read a plan CSV written by :meth:`save_csv`, refusing any that is not intact.
 
-        The checksum, the node count and the line length recorded in the file are checked
-        against its rows, so a plan truncated (even at a row boundary), edited by hand or
-        spliced from two files raises a :class:`PlanningError` that names the file and says to
-        re-plan.
+        The checksum (which covers the header, the line length and every number) and the node
+        count recorded in the file are checked against its rows, so a plan truncated (even at a
+        row boundary), edited by hand or spliced from two files raises a :class:`PlanningError`
+        that names the file and says to re-plan.
 
         Parameters
         ----------
@@ -316,7 +316,7 @@ class Trajectory:
                 text = fh.read()
         except (OSError, UnicodeDecodeError) as exc:
             raise PlanningError(f"cannot read plan file {where!r}: {exc}") from exc
-        meta, header, rows, digest_line = _split_plan_text(text)
+        meta, header, rows, digest_line, covered = _split_plan_text(text)
         replan = "re-plan with `racing-lib plan --out PLAN.csv`"
         if tuple(h.strip() for h in header) != PLAN_COLUMNS:
             raise PlanningError(
@@ -348,8 +348,7 @@ class Trajectory:
                 f"plan file {where!r} has {len(data)} rows where its header says {nodes} (it "
                 f"was cut short or spliced); {replan}."
             )
-        body = text[: text.rindex("# sha256:")].lstrip("\ufeff")
-        if digest_line != _plan_digest(body):
+        if digest_line != _plan_digest(covered):
             raise PlanningError(
                 f"plan file {where!r} fails its checksum (its numbers or header were changed "
                 f"after it was written), so the plan cannot be trusted; {replan}."
@@ -551,24 +550,30 @@ def _int_or(value: str | None, default: int) -> int:
         return default
 
 
-def _split_plan_text(text: str) -> tuple[dict[str, str], list[str], list[str], str | None]:
-    """A plan file's metadata, header fields, data rows and recorded checksum (or None)."""
+def _split_plan_text(
+    text: str,
+) -> tuple[dict[str, str], list[str], list[str], str | None, str]:
+    """A plan file's metadata, header fields, data rows, recorded checksum (or None) and the
+    text the checksum covers (every line above the checksum line)."""
     meta: dict[str, str] = {}
     header: list[str] = []
     rows: list[str] = []
     digest: str | None = None
-    for line in text.lstrip("\ufeff").splitlines():
+    lines = text.lstrip("\ufeff").splitlines()
+    covered = len(lines)
+    for i, line in enumerate(lines):
         if line.startswith("#"):
             key, sep, value = line[1:].partition(":")
             if sep and key.strip() == "sha256":
                 digest = value.strip()
+                covered = i
             elif sep and not header:
                 meta[key.strip()] = value.strip()
         elif not header:
             header = line.strip().split(",")
         elif line.strip():
             rows.append(line)
-    return meta, header, rows, digest
+    return meta, header, rows, digest, "\n".join(lines[:covered])
 
 
 def _parse_plan_rows(rows: list[str], where: str, replan: str) -> np.ndarray:
