@@ -16,10 +16,11 @@ identification and the paper's ablations mean something:
 * fixed-step RK4 inside each control step; seeded per-trial randomness (actuation noise and a small
   friction variation), bit-for-bit reproducible per seed.
 
-The smooth part of the physics is one function, `car_vector_field`, that runs on floats (the fast
-path, the `math` module) and on CasADi symbols, so a planner can optimize a lap with the simulated
-car's own equations. The discrete parts (gear choice, walls, edge friction) stay in `SimulatedCar`.
-Every parameter lives in `racing_lib.vehicle.VehicleParams`.
+The smooth part of the physics is one function, `racing_lib.vehicle.dynamics.car_vector_field`,
+that runs on floats (the fast path, the `math` module) and on CasADi symbols, so a planner can
+optimize a lap with the simulated car's own equations without importing the plant. The discrete
+parts (gear choice, walls, edge friction) stay here, in `SimulatedCar`. Every parameter lives in
+`racing_lib.vehicle.VehicleParams`; the protocol it implements, `racing_lib.interfaces.Plant`.
 
 Taught in notebook 02 (the simulated car and its logs).
 """
@@ -27,249 +28,26 @@ Taught in notebook 02 (the simulated car and its logs).
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
-from dataclasses import dataclass
-from enum import IntEnum
-from typing import Any, Protocol, runtime_checkable
+from typing import Any
 
 import numpy as np
 
 from racing_lib.errors import ControlError, PlantError
+from racing_lib.interfaces import Observation
 from racing_lib.track import FrenetTracker, Track
-from racing_lib.vehicle import (
-    MATH_OPS,
-    VehicleParams,
+from racing_lib.vehicle.dynamics import SimState, car_vector_field
+from racing_lib.vehicle.forces import (
     axle_cornering_stiffness,
     drive_force,
     gear_rpm,
     static_axle_loads,
     wheel_loads,
 )
+from racing_lib.vehicle.params import VehicleParams
 
-__all__ = [
-    "Observation",
-    "Plant",
-    "SimState",
-    "SimulatedCar",
-    "car_vector_field",
-    "tyre_limits",
-]
+__all__ = ["SimulatedCar"]
 
 _TWO_PI = 2.0 * math.pi
-
-
-@dataclass(frozen=True, slots=True)
-class Observation:
-    """What the car reports after each control step: spatial states only (as the paper's GTS API).
-
-    Attributes
-    ----------
-    t : time since reset, s.
-    x, y : position of the centre of gravity, m.
-    psi : yaw angle, rad (continuous, not wrapped).
-    vx, vy : velocity in the body frame (forward, left), m/s.
-    r : yaw rate, rad/s (counter-clockwise positive).
-    """
-
-    t: float
-    x: float
-    y: float
-    psi: float
-    vx: float
-    vy: float
-    r: float
-
-
-@runtime_checkable
-class Plant(Protocol):
-    """Anything the lap runner can drive: the simulated car or another simulator.
-
-    Attributes
-    ----------
-    dt : control period, s.
-    """
-
-    dt: float
-
-    def reset(self, seed: int | None = None) -> Observation:
-        """Start a new trial (seeded randomness) and return the first observation."""
-        ...
-
-    def step(self, steer_rad: float, pedal: float) -> Observation:
-        """Apply (steering angle command, rad; pedal in [-1, 1]) for one period dt."""
-        ...
-
-
-class SimState(IntEnum):
-    """Indices of the simulator's continuous state."""
-
-    X = 0  #: position x, m
-    Y = 1  #: position y, m
-    PSI = 2  #: yaw angle, rad
-    VX = 3  #: longitudinal velocity (body frame), m/s
-    VY = 4  #: lateral velocity (body frame, left positive), m/s
-    R = 5  #: yaw rate, rad/s
-    DELTA = 6  #: actual road-wheel steering angle, rad
-
-
-N_STATE = len(SimState)
-# Plain-int copies of the indices for the hot path (IntEnum lookups cost time there).
-_PSI, _VX, _VY, _R, _DELTA = (int(SimState[n]) for n in ("PSI", "VX", "VY", "R", "DELTA"))
-
-
-def tyre_limits(
-    p: VehicleParams,
-    fz: Any,
-    fz_static: float,
-    mu: Any,
-    b: float,
-    c: float,
-    d: float,
-    alpha: Any,
-    ops: Any,
-    floor_max: Callable[[Any, float], Any] | None = None,
-) -> tuple[Any, Any, Any, Any]:
-    """Force limits of one wheel: the simulated car's tyre law (floats, arrays or CasADi).
-
-    Parameters
-    ----------
-    p : VehicleParams
-        The car.
-    fz : load on the wheel, N; fz_static : its static value on flat ground, N.
-    mu : friction coefficient under the wheel, -; b, c, d : its axle's Pacejka B (1/rad), C, D.
-    alpha : slip angle, rad.
-    ops : the backend's math (``racing_lib.vehicle.ops_for``).
-    floor_max : callable, optional
-        ``max(a, floor^2)`` used for the traction control and ABS floors (default ``ops.fmax``);
-        planners pass a rounded one, since a kink in a constraint makes IPOPT cycle.
-
-    Returns
-    -------
-    f_peak : peak force with load sensitivity, N.
-    shape : lateral use of the peak in pure slip, ``sin(C atan(B_eff alpha))``, -; the stiffness
-        grows less than the load (``B_eff = B (fz_static / fz)^q``).
-    f_drive_max : traction control, drive force up to what the lateral use leaves of the circle, N.
-    f_brake_max : ABS, brake force up to what keeps part of the lateral grip, N.
-    """
-    floor_max = floor_max or ops.fmax
-    f_peak = mu * fz * d * (1.0 - p.load_sensitivity * (fz - p.F_z0) / p.F_z0)
-    b_eff = b * (fz_static / ops.fmax(fz, 1.0)) ** p.stiffness_load_exponent
-    shape = ops.sin(c * ops.atan(b_eff * alpha))
-    floor2 = 1.0 if p.tcs_floor >= 1.0 else p.tcs_floor * p.tcs_floor
-    f_drive_max = f_peak * ops.sqrt(floor_max(1.0 - shape * shape, floor2))
-    if p.abs_share is None:
-        f_brake_max = f_peak
-    else:
-        f_brake_max = f_peak * ops.sqrt(floor_max(p.abs_share**2 - shape * shape, floor2))
-    return f_peak, shape, f_drive_max, f_brake_max
-
-
-def car_vector_field(
-    state: Any,
-    delta_cmd: Any,
-    f_drive: Any,
-    f_brake: Any,
-    theta: Any,
-    mu_wheels: tuple[Any, Any, Any, Any],
-    a_transfer: tuple[Any, Any],
-    p: VehicleParams,
-    ops: Any = MATH_OPS,
-) -> tuple[tuple[Any, ...], tuple[Any, Any]]:
-    """Continuous-time dynamics of the simulated car (the smooth part).
-
-    Works with floats (``ops=MATH_OPS``, the simulator's fast path) and with CasADi symbols
-    (``ops=CASADI_OPS``); min/max are the only non-smooth operations.
-
-    Parameters
-    ----------
-    state : sequence of 7
-        [x, y, psi, v_x, v_y, r, delta] (see `SimState`), m, m, rad, m/s, m/s, rad/s, rad.
-    delta_cmd : steering command after the angle limit, rad.
-    f_drive : total drive force the powertrain delivers to the rear wheels (before the tire
-        limit), N, >= 0.
-    f_brake : total brake force (before the split and the tire limit), N, >= 0.
-    theta : road pitch, rad (positive uphill).
-    mu_wheels : friction coefficients of the wheels (FL, FR, RL, RR), -.
-    a_transfer : (a_x, a_y), the accelerations that set the load transfer, m/s^2. The wheel loads
-        depend on the tire forces, which depend on the loads (an algebraic loop). The simulator
-        closes it quasi-statically with the ground-force accelerations of the previous substep
-        (returned here as the second output); a planner can make them decision variables with the
-        constraint a_transfer == returned accelerations.
-    p : vehicle parameters.
-    ops : math backend (`racing_lib.vehicle.MATH_OPS` or `CASADI_OPS`).
-
-    Returns
-    -------
-    d_state : tuple of 7
-        Time derivative of the state.
-    a_ground : (a_x, a_y)
-        Accelerations of the ground forces on the tires (drive, brake, rolling, lateral), body
-        frame, m/s^2: the load-transfer input for the next substep.
-    """
-    psi, vx, vy, r, delta = state[_PSI], state[_VX], state[_VY], state[_R], state[_DELTA]
-    sin, cos, atan, fmin, fmax = ops.sin, ops.cos, ops.atan, ops.fmin, ops.fmax
-    m = p.m
-    sd, cd = sin(delta), cos(delta)
-
-    # Vertical loads (double track, longitudinal + lateral transfer, paper Eq. 11-13).
-    fz_fl, fz_fr, fz_rl, fz_rr = wheel_loads(p, a_transfer[0], a_transfer[1], theta, ops)
-
-    # Slip angles; the speed in the denominator is clamped so the dynamics stay bounded near
-    # standstill (the car is not meant to reverse).
-    vx_s = fmax(ops.fabs(vx), p.v_min_slip)
-    alpha_f = delta - atan((vy + p.l_f * r) / vx_s)
-    alpha_r = -atan((vy - p.l_r * r) / vx_s)
-
-    # Smooth sign of the motion: brakes and rolling resistance fade out at standstill.
-    sgn = ops.tanh(vx / p.v_smooth)
-    fb_f = -0.5 * p.brake_front_share * f_brake * sgn  # per front wheel, N
-    fb_r = -0.5 * (1.0 - p.brake_front_share) * f_brake * sgn  # per rear wheel, N
-    fx_r_cmd = 0.5 * f_drive + fb_r  # rear-wheel drive, equal split (ideal differential)
-
-    min_share2 = p.min_lateral_share * p.min_lateral_share
-    w_half = 0.5 * m * p.g / (p.l_f + p.l_r)
-    fzs_f, fzs_r = w_half * p.l_r, w_half * p.l_f  # static wheel loads on flat ground, N
-
-    def wheel(
-        fz: Any, fz_static: float, mu: Any, b: float, c: float, d: float, alpha: Any, fx_cmd: Any
-    ) -> tuple[Any, Any]:
-        # The longitudinal force is limited by the peak, traction control and ABS; the lateral
-        # force gets what is left of the friction ellipse.
-        f_peak, shape, f_drive_max, f_brake_max = tyre_limits(
-            p, fz, fz_static, mu, b, c, d, alpha, ops
-        )
-        fx = fmin(fmax(fx_cmd, -f_brake_max), fmin(f_peak, f_drive_max))
-        share = ops.sqrt(fmax(1.0 - fx * fx / (f_peak * f_peak + 1.0), min_share2))
-        return fx, f_peak * shape * share
-
-    fx_fl, fy_fl = wheel(fz_fl, fzs_f, mu_wheels[0], p.B_f, p.C_f, p.D_f, alpha_f, fb_f)
-    fx_fr, fy_fr = wheel(fz_fr, fzs_f, mu_wheels[1], p.B_f, p.C_f, p.D_f, alpha_f, fb_f)
-    fx_rl, fy_rl = wheel(fz_rl, fzs_r, mu_wheels[2], p.B_r, p.C_r, p.D_r, alpha_r, fx_r_cmd)
-    fx_rr, fy_rr = wheel(fz_rr, fzs_r, mu_wheels[3], p.B_r, p.C_r, p.D_r, alpha_r, fx_r_cmd)
-
-    # Front wheel forces rotated by the steering angle into the body frame.
-    fxb_fl, fyb_fl = fx_fl * cd - fy_fl * sd, fx_fl * sd + fy_fl * cd
-    fxb_fr, fyb_fr = fx_fr * cd - fy_fr * sd, fx_fr * sd + fy_fr * cd
-    rolling = p.c_rr * (fz_fl + fz_fr + fz_rl + fz_rr) * sgn
-    f_x = fxb_fl + fxb_fr + fx_rl + fx_rr - rolling
-    f_y = fyb_fl + fyb_fr + fy_rl + fy_rr
-    half_t = 0.5 * p.l_t
-    m_z = (
-        p.l_f * (fyb_fl + fyb_fr)
-        - p.l_r * (fy_rl + fy_rr)
-        + half_t * (fxb_fr - fxb_fl + fx_rr - fx_rl)  # left wheels sit at y = +l_t/2
-    )
-    drag = p.C_xw * vx * ops.fabs(vx)
-
-    d_vx = (f_x - drag) / m - p.g * sin(theta) + r * vy
-    d_vy = f_y / m - r * vx
-    d_r = m_z / p.I_zz
-    sp, cp = sin(psi), cos(psi)
-    d_x = vx * cp - vy * sp
-    d_y = vx * sp + vy * cp
-    # Steering actuator: first-order lag, rate-limited.
-    d_delta = fmin(fmax((delta_cmd - delta) / p.steer_tau, -p.steer_rate_max), p.steer_rate_max)
-    return (d_x, d_y, r, d_vx, d_vy, d_r, d_delta), (f_x / m, f_y / m)
 
 
 class SimulatedCar:

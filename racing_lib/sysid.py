@@ -7,10 +7,11 @@ slip, load-sensitive tyres, gears, power limit, steering lag), so the identified
 best planning-model fit to a different car -- as they were in the paper.
 
 What a user of a real car has, and all we use: time, position, yaw, the body-frame velocities
-``v_x, v_y``, the yaw rate ``r`` (the spatial observations of :class:`~racing_lib.sim.Observation`),
-the commands sent (steering command and pedal), and the track map (road pitch ``theta`` at the
-car's position). The car's internals (``state_info()``: gear, actual steering angle, ...) are never
-used; only the report compares against the true :class:`~racing_lib.vehicle.VehicleParams`.
+``v_x, v_y``, the yaw rate ``r`` (the spatial observations of
+:class:`~racing_lib.interfaces.Observation`), the commands sent (steering command and pedal), and
+the track map (road pitch ``theta`` at the car's position). The car's internals (``state_info()``:
+gear, actual steering angle, ...) are never used; only the report compares against the true
+:class:`~racing_lib.vehicle.VehicleParams`.
 
 Taken as known (the paper lists them as the car's data sheet): ``m, l_f, l_r, h_c, l_t, mu, g``.
 Identified, in this order (each step uses the ones before it):

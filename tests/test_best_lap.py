@@ -9,10 +9,11 @@ import pytest
 
 from racing_lib.errors import PlanningError
 from racing_lib.planning.best_lap import BestLapSettings, V, frenet_kinematics, solve_best_lap
-from racing_lib.sim import SimulatedCar, car_vector_field
+from racing_lib.sim import SimulatedCar
 from racing_lib.tracks import circle_track
 from racing_lib.tracks.segments import Arc, Straight, track_from_segments
 from racing_lib.vehicle import MATH_OPS, VehicleParams
+from racing_lib.vehicle.dynamics import car_vector_field
 
 RADIUS = 50.0
 

@@ -10,10 +10,9 @@ from functools import partial
 import numpy as np
 import pytest
 
-from racing_lib.control.base import Command
 from racing_lib.errors import PlantError
 from racing_lib.experiment import LapMetrics, run_lap, run_trials, summarize
-from racing_lib.sim import Observation
+from racing_lib.interfaces import Command, Observation
 from racing_lib.tracks import circle_track
 
 

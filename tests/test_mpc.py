@@ -10,7 +10,6 @@ import pytest
 from scipy.linalg import expm
 
 from racing_lib.config import fast_mode
-from racing_lib.control.base import Command, Controller
 from racing_lib.control.mpc import (
     MX,
     CoupledMPC,
@@ -30,6 +29,10 @@ from racing_lib.control.mpc_qp import (
     tracking_cost,
 )
 from racing_lib.errors import ControlError
+from racing_lib.interfaces import (
+    Command,
+    Controller,
+)
 from racing_lib.model import NU, NX, U, X, discretize
 
 TIGHT = QPSettings(eps_abs=1e-10, eps_rel=1e-10, max_iter=200000, polish=True)
@@ -275,7 +278,7 @@ def test_linearization_is_exact_to_first_order(circle_setup, substeps):
 
 def test_heuristic_trajectory_and_reference(circle_setup):
     """Reference spaced by plan time; the heuristic falls linearly from the state to the plan."""
-    from racing_lib.sim import Observation
+    from racing_lib.interfaces import Observation
 
     plan, params = circle_setup
     N = 10

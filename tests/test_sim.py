@@ -11,9 +11,17 @@ import numpy as np
 import pytest
 
 from racing_lib.errors import ControlError, PlantError, RacingLibError
-from racing_lib.sim import Observation, Plant, SimState, SimulatedCar, car_vector_field
+from racing_lib.interfaces import (
+    Observation,
+    Plant,
+)
+from racing_lib.sim import SimulatedCar
 from racing_lib.track import Path, Track
 from racing_lib.vehicle import CASADI_OPS, VehicleParams, static_axle_loads
+from racing_lib.vehicle.dynamics import (
+    SimState,
+    car_vector_field,
+)
 
 P = VehicleParams()
 G = P.g

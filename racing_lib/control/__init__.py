@@ -4,8 +4,11 @@ from __future__ import annotations
 
 from typing import Any
 
-from racing_lib.control.base import Command, Controller
 from racing_lib.errors import ControlError
+from racing_lib.interfaces import (
+    Command,
+    Controller,
+)
 
 CONTROLLER_NAMES = ("nominal", "coupled-mpc", "decoupled-mpc")
 

@@ -50,9 +50,9 @@ from typing import Any
 
 import numpy as np
 
-from racing_lib.control.base import Command
 from racing_lib.control.mpc_qp import QPData, QPSettings, QPShape, QPSolution, TrackingQP
 from racing_lib.errors import ControlError
+from racing_lib.interfaces import Command
 from racing_lib.jit import compile_function
 from racing_lib.model import NU, NX, U, X, discrete_linearization
 

@@ -13,9 +13,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from racing_lib.control.base import Command
 from racing_lib.errors import ControlError
-from racing_lib.sim import Observation
+from racing_lib.interfaces import Command, Observation
 from racing_lib.track import FrenetTracker, Path
 
 SpeedFunction = Callable[[float], float]

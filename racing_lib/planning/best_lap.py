@@ -5,7 +5,7 @@ the time-optimal lap of the simulated car itself: the same NLP as
 :mod:`racing_lib.planning.time_optimal` (trapezoidal collocation over the centerline grid,
 periodic flying lap, IPOPT with the exact Hessian, everything scaled to order one), but with the
 plant's vector field
-(:func:`racing_lib.sim.car_vector_field`) and its true parameters
+(:func:`racing_lib.vehicle.dynamics.car_vector_field`) and its true parameters
 (:class:`racing_lib.vehicle.VehicleParams`) instead of the identified planning model.
 
 Per node of the grid (:class:`racing_lib.planning.curvature.TrackGrid`):
@@ -60,8 +60,8 @@ from racing_lib.planning.time_optimal import (
     trapezoid_lap_time,
 )
 from racing_lib.planning.trajectory import Trajectory
-from racing_lib.sim import tyre_limits
 from racing_lib.vehicle import VehicleParams
+from racing_lib.vehicle.dynamics import tyre_limits
 
 __all__ = [
     "BestLapResult",
@@ -95,8 +95,8 @@ _SCALE = np.array([30.0, 1.0, 0.5, 0.1, 0.2, 5.0, 0.1, 5000.0, 10000.0, 5.0, 10.
 
 def _wheel_limits(p: VehicleParams, fz: Any, front: bool, alpha: Any, ops: Any) -> tuple[Any, Any]:
     """Brake (ABS) and drive (traction control) limits of one wheel, N: the sim's tyre law
-    (:func:`racing_lib.sim.tyre_limits`) with its floors' kinks rounded off (width 0.01), since a
-    kink in a constraint at the optimum makes IPOPT cycle."""
+    (:func:`racing_lib.vehicle.dynamics.tyre_limits`) with its floors' kinks rounded off (width
+    0.01), since a kink in a constraint at the optimum makes IPOPT cycle."""
     b, c, d = (p.B_f, p.C_f, p.D_f) if front else (p.B_r, p.C_r, p.D_r)
     w_half = 0.5 * p.m * p.g / (p.l_f + p.l_r)
     fz_static = w_half * (p.l_r if front else p.l_f)
@@ -257,8 +257,8 @@ def _node_function(p: VehicleParams, st: BestLapSettings) -> tuple[Any, list[flo
     """CasADi function of one node: (w scaled, kappa, theta) -> (dstate/ds, path g, 1/s_dot)."""
     import casadi as ca
 
-    from racing_lib.sim import car_vector_field
     from racing_lib.vehicle import CASADI_OPS, drive_force_envelope, wheel_loads
+    from racing_lib.vehicle.dynamics import car_vector_field
 
     ops = CASADI_OPS
     w = ca.SX.sym("w", _NV)
