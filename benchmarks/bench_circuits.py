@@ -34,7 +34,7 @@ from racing_lib.errors import RacingLibError
 from racing_lib.pipeline import race
 from racing_lib.planning import plan
 from racing_lib.planning.trajectory import Trajectory
-from racing_lib.track import load_track
+from racing_lib.tracks import load_track
 
 COLUMNS = (
     ("circuit", "{:<13}"),

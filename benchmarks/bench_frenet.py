@@ -11,8 +11,8 @@ import time
 
 import numpy as np
 
-from racing_lib.track import FrenetTracker, load_track
-from racing_lib.tracks import expressway_track, shortcut_track
+from racing_lib.geometry import FrenetTracker
+from racing_lib.tracks import expressway_track, load_track, shortcut_track
 
 
 def _median_us(fn, args: list[tuple], repeat: int = 5) -> float:

@@ -31,7 +31,7 @@ from racing_lib.experiment import run_lap
 from racing_lib.planning.trajectory import Trajectory
 from racing_lib.sim import SimulatedCar
 from racing_lib.sysid import identified_params
-from racing_lib.track import load_track
+from racing_lib.tracks import load_track
 from racing_lib.tuning import configuration_name, tuned_weights
 
 PARTS = ("project", "reference", "linearize", "build", "qp", "pedal", "total")

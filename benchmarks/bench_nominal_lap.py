@@ -14,7 +14,10 @@ import time
 
 from racing_lib.experiment import LapSpec, drive_lap
 from racing_lib.planning.trajectory import Trajectory
-from racing_lib.track import builtin_track_names, load_track
+from racing_lib.tracks import (
+    builtin_track_names,
+    load_track,
+)
 
 SPEED_SCALE = 0.75  # the moderate reference of chapter 01
 

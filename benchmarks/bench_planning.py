@@ -23,7 +23,7 @@ from racing_lib.planning import (
     solve_time_optimal,
 )
 from racing_lib.planning.time_optimal import clear_cache, lap_time_with_model
-from racing_lib.track import load_track
+from racing_lib.tracks import load_track
 
 ABLATIONS = {
     "all effects": ModelOptions(),

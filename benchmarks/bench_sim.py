@@ -20,8 +20,12 @@ import time
 import numpy as np
 
 from racing_lib.errors import TrackError
+from racing_lib.geometry import (
+    Path,
+    Track,
+)
 from racing_lib.sim import SimulatedCar
-from racing_lib.track import Path, Track, load_track
+from racing_lib.tracks import load_track
 
 SEED = 7
 RUNS = 5

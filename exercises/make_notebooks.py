@@ -67,7 +67,7 @@ kinematic equations yourself. Each exercise gives a function to complete: replac
 `raise NotImplementedError` by your code and run the check below it. A check compares your function
 with `racing_lib` on several cases and tells you, in metres and seconds, what differs.
 
-Allowed tools: `numpy`, `scipy`, and the *evaluation* methods of a `racing_lib.track.Path`:
+Allowed tools: `numpy`, `scipy`, and the *evaluation* methods of a `racing_lib.geometry.Path`:
 `path.position(s)`, `path.heading(s)`, `path.curvature(s)`, `path.sample(ds=...)`, `path.length`
 (not `to_frenet` or `to_cartesian`: those are what you are rebuilding).""",
     imports="""import math

@@ -71,10 +71,11 @@ import numpy as np
 from racing_lib.config import fast_mode
 from racing_lib.errors import ControlError, PlanningError, RacingLibError, TrackError
 from racing_lib.experiment import LapMetrics, LapSpec, drive_lap, run_trials, summarize
+from racing_lib.geometry import Track
 from racing_lib.io import atomic_write_text, jsonable
 from racing_lib.planning.trajectory import Trajectory
 from racing_lib.provenance import environment
-from racing_lib.track import Track, load_track
+from racing_lib.tracks import load_track
 from racing_lib.tuning import (
     MPC_WEIGHT_NAMES,
     TUNING_CONFIGS,

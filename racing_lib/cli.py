@@ -51,7 +51,10 @@ def cmd_tracks(args: argparse.Namespace) -> int:
     """List the built-in tracks with their length, width range and boundary kind."""
     import numpy as np
 
-    from racing_lib.track import builtin_track_names, load_track
+    from racing_lib.tracks import (
+        builtin_track_names,
+        load_track,
+    )
 
     rows = []
     for name in builtin_track_names():
@@ -120,7 +123,7 @@ def _make_plan(args: argparse.Namespace, track):
 
 def cmd_plan(args: argparse.Namespace) -> int:
     """Plan a lap and optionally save it as a plan CSV."""
-    from racing_lib.track import load_track
+    from racing_lib.tracks import load_track
 
     track = load_track(args.track)
     _say(f"planning {track.name} ({track.length:.0f} m) with method '{args.method}' ...")
@@ -236,7 +239,7 @@ def _save_lap_outputs(out_dir: FilePath, track, trajectory, results, report) -> 
 def cmd_tune(args: argparse.Namespace) -> int:
     """Tune the coupled MPC's weights with CMA-ES on the time-optimal plan of a track."""
     from racing_lib.io import atomic_write_json, jsonable
-    from racing_lib.track import load_track
+    from racing_lib.tracks import load_track
     from racing_lib.tuning import TuningSettings, config_spec, tune_weights
 
     track = load_track(args.track)

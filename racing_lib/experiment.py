@@ -2,7 +2,7 @@
 
 A lap is driven by any :class:`~racing_lib.interfaces.Plant` (the simulated car or another
 simulator) and any :class:`~racing_lib.interfaces.Controller`, along any reference that has a
-``path`` (a :class:`~racing_lib.track.Path`) and ``s``/``vx`` arrays (a planned
+``path`` (a :class:`~racing_lib.geometry.Path`) and ``s``/``vx`` arrays (a planned
 :class:`~racing_lib.planning.trajectory.Trajectory`). The car starts some distance before the
 start/finish line at the reference speed (a *flying* lap, as in a time trial); the lap is timed from
 the first crossing of the line to the next, both interpolated within the control period.
@@ -26,13 +26,17 @@ from typing import Any, Protocol, TypeVar
 import numpy as np
 
 from racing_lib.errors import PlantError, RacingLibError
+from racing_lib.geometry import (
+    FrenetTracker,
+    Path,
+    Track,
+)
 from racing_lib.interfaces import (
     Controller,
     Observation,
     Plant,
 )
 from racing_lib.io import atomic_write_bytes
-from racing_lib.track import FrenetTracker, Path, Track
 
 
 class Reference(Protocol):

@@ -1,7 +1,7 @@
 """The whole pipeline in one call: track -> plan -> (tuned) controller -> closed-loop laps.
 
 :func:`race` strings together what the chapters build one at a time: it loads a track
-(:func:`racing_lib.track.load_track`), plans a lap (:func:`racing_lib.planning.plan`), picks the
+(:func:`racing_lib.tracks.load_track`), plans a lap (:func:`racing_lib.planning.plan`), picks the
 MPC weights that CMA-ES tuned for that set-up (:func:`racing_lib.tuning.configuration_name`,
 :func:`racing_lib.tuning.tuned_weights`), and drives seeded flying laps of the simulated car
 (:class:`racing_lib.experiment.LapSpec`, :func:`racing_lib.experiment.drive_lap`). It adds no
@@ -37,8 +37,9 @@ import numpy as np
 
 from racing_lib.errors import ArgumentError, ControlError, checked_arguments
 from racing_lib.experiment import LapMetrics, LapResult, LapSpec, drive_lap, summarize
+from racing_lib.geometry import Track
 from racing_lib.planning import PlanResult, Trajectory, plan
-from racing_lib.track import Track, load_track
+from racing_lib.tracks import load_track
 
 #: Values of ``race(weights=...)`` that name a choice rather than give the weights.
 WEIGHT_CHOICES = ("tuned", "default")

@@ -16,7 +16,7 @@ import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
-from racing_lib.track import Track
+from racing_lib.geometry import Track
 
 #: Colours of the recurring lines, so that "plan" looks the same in every chapter.
 COLORS: dict[str, str] = {

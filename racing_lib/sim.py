@@ -33,8 +33,11 @@ from typing import Any
 import numpy as np
 
 from racing_lib.errors import ControlError, PlantError
+from racing_lib.geometry import (
+    FrenetTracker,
+    Track,
+)
 from racing_lib.interfaces import Observation
-from racing_lib.track import FrenetTracker, Track
 from racing_lib.vehicle.dynamics import SimState, car_vector_field
 from racing_lib.vehicle.forces import (
     axle_cornering_stiffness,

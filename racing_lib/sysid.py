@@ -270,7 +270,10 @@ def _record(
 
 def _proving_ground(radius: float, width: float, name: str) -> Any:
     """A flat, open circular test area of the given centre-line radius and total width (m)."""
-    from racing_lib.track import Path, Track
+    from racing_lib.geometry import (
+        Path,
+        Track,
+    )
 
     n = max(int(2.0 * math.pi * radius / 5.0), 64)
     a = np.linspace(0.0, 2.0 * math.pi, n, endpoint=False)
@@ -505,8 +508,9 @@ def lap_logs(
     :func:`racing_lib.planning.speed.speed_profile`, m/s.
     """
     from racing_lib.control.nominal import NominalController, NominalSettings
+    from racing_lib.geometry import FrenetTracker
     from racing_lib.planning.speed import speed_profile
-    from racing_lib.track import FrenetTracker, load_track
+    from racing_lib.tracks import load_track
 
     vp = _vehicle(params)
     logs = []

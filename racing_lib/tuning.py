@@ -1165,8 +1165,7 @@ def main_tuning_tracks() -> list[Any]:
     the three are not tuned to one layout, and every real circuit stays unseen for testing them
     (``benchmarks/bench_circuits.py``).
     """
-    from racing_lib.track import load_track
-    from racing_lib.tracks import figure_eight_track
+    from racing_lib.tracks import figure_eight_track, load_track
 
     return [load_track("expressway"), load_track("shortcut"), figure_eight_track(80.0, 12.0)]
 
@@ -1214,7 +1213,8 @@ def generate_tuned_weights(
         configuration (its name, e.g. ``'main'``: the ablations start from the main result, so a
         shorter budget suffices), or explicit weights.
     """
-    from racing_lib.track import Track, load_track
+    from racing_lib.geometry import Track
+    from racing_lib.tracks import load_track
 
     start = tuned_weights(initial) if isinstance(initial, str) else initial
     if isinstance(initial, str) and start is None:

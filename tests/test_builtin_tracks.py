@@ -14,15 +14,18 @@ import numpy as np
 import pytest
 
 from racing_lib.errors import TrackError
-from racing_lib.track import Path, _self_intersections, builtin_track_names, load_track
-from racing_lib.track import wall_clearance as track_wall_clearance
+from racing_lib.geometry import Path
+from racing_lib.geometry import wall_clearance as track_wall_clearance
+from racing_lib.geometry.crossings import self_intersections
 from racing_lib.tracks import (
     Arc,
     Straight,
     build_centerline,
+    builtin_track_names,
     circle_track,
     corner_positions,
     crucial_corners,
+    load_track,
     track_from_segments,
 )
 
@@ -56,10 +59,10 @@ def test_geometry_is_sound(name):
     track = load_track(name)
     path = track.centerline
     # Closed, simple, and both edges simple too.
-    assert not _self_intersections(np.column_stack(path.position(path.knots)))
+    assert not self_intersections(np.column_stack(path.position(path.knots)))
     xl, yl, xr, yr = track.edges()
-    assert not _self_intersections(np.column_stack([xl, yl]))
-    assert not _self_intersections(np.column_stack([xr, yr]))
+    assert not self_intersections(np.column_stack([xl, yl]))
+    assert not self_intersections(np.column_stack([xr, yr]))
     # The road never reaches past a centre of curvature (Frenet coordinates stay unique).
     s = path.sample(ds=0.5)
     kappa = path.curvature(s)

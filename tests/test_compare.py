@@ -17,8 +17,7 @@ from racing_lib.planning.compare import (
     time_along_centerline,
     time_gap,
 )
-from racing_lib.track import load_track
-from racing_lib.tracks import circle_track
+from racing_lib.tracks import circle_track, load_track
 
 # A point mass with friction only: no drag, rolling resistance or powertrain limit, so that on a
 # circle of radius R the speed is exactly sqrt(mu g R).

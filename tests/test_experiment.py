@@ -136,7 +136,7 @@ def test_nominal_controller_laps_each_builtin_track_cleanly(name):
     from racing_lib.control.nominal import MODERATE_SPEED_SCALE
     from racing_lib.experiment import LapSpec, drive_lap
     from racing_lib.planning.trajectory import Trajectory
-    from racing_lib.track import load_track
+    from racing_lib.tracks import load_track
 
     track = load_track(name)
     reference = Trajectory.from_centerline(track).scale_speed(MODERATE_SPEED_SCALE)

@@ -329,7 +329,7 @@ def _plan(track, params):
 @pytest.fixture(scope="module")
 def setups():
     from racing_lib.sysid import identified_params
-    from racing_lib.track import load_track
+    from racing_lib.tracks import load_track
 
     params = identified_params()
     out = {}

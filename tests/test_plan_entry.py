@@ -8,8 +8,12 @@ import pytest
 
 import racing_lib.planning as planning
 from racing_lib.errors import ArgumentError, PlanningError, RacingLibError
+from racing_lib.geometry import (
+    Path,
+    Track,
+)
 from racing_lib.planning import LargePlanWarning, plan
-from racing_lib.track import Path, Track, load_track
+from racing_lib.tracks import load_track
 
 
 @pytest.fixture(scope="module")

@@ -11,12 +11,15 @@ import numpy as np
 import pytest
 
 from racing_lib.errors import ControlError, PlantError, RacingLibError
+from racing_lib.geometry import (
+    Path,
+    Track,
+)
 from racing_lib.interfaces import (
     Observation,
     Plant,
 )
 from racing_lib.sim import SimulatedCar
-from racing_lib.track import Path, Track
 from racing_lib.vehicle import CASADI_OPS, VehicleParams, static_axle_loads
 from racing_lib.vehicle.dynamics import (
     SimState,

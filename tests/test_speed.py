@@ -96,7 +96,7 @@ def test_braking_before_a_corner_is_limited():
 
 
 def test_expressway_centerline_lap_time_is_plausible():
-    from racing_lib.track import load_track
+    from racing_lib.tracks import load_track
 
     track = load_track("expressway")
     s = track.centerline.sample(ds=3.0)

@@ -163,7 +163,7 @@ def test_track_narrower_than_the_car_is_refused():
 
 @pytest.mark.slow
 def test_expressway_cold_start():
-    from racing_lib.track import load_track
+    from racing_lib.tracks import load_track
 
     res = solve_time_optimal(load_track("expressway"), start="cold")
     assert res.success, res.status

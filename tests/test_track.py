@@ -1,4 +1,4 @@
-"""Tests of racing_lib.track: arc length, curvature, Frenet frame, tracker, CSV and validation.
+"""Tests of racing_lib.geometry: arc length, curvature, Frenet frame, tracker, CSV and validation.
 
 Independent truths: a circle's curvature is 1/R and its length 2 pi R; Frenet -> Cartesian ->
 Frenet is the identity inside the track; an arc-length parametrization has |dr/ds| = 1.
@@ -16,8 +16,12 @@ from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
 from racing_lib.errors import TrackError
-from racing_lib.track import FrenetTracker, Path, Track, load_track
-from racing_lib.tracks import circle_track
+from racing_lib.geometry import (
+    FrenetTracker,
+    Path,
+    Track,
+)
+from racing_lib.tracks import circle_track, load_track
 
 SHARED_TRACKS = FsPath(__file__).resolve().parents[2] / "shared" / "tracks"
 REAL_CSV = SHARED_TRACKS / "Spielberg.csv"
@@ -492,7 +496,10 @@ def test_track_rejects_bad_arguments():
 
 
 def test_an_inner_width_past_the_turn_centre_is_clipped_with_a_warning_that_says_where():
-    from racing_lib.track_geometry import INNER_WIDTH_SHARE, TrackGeometryWarning
+    from racing_lib.geometry.checks import (
+        INNER_WIDTH_SHARE,
+        TrackGeometryWarning,
+    )
 
     # A circle of radius 3 m driven anticlockwise: the left side is the inside.
     t = np.linspace(0.0, 2.0 * np.pi, 40, endpoint=False)
@@ -530,7 +537,7 @@ def test_a_byte_order_mark_is_accepted(tmp_path):
 
 
 def test_very_dense_points_are_thinned_with_a_warning(tmp_path):
-    from racing_lib.track_geometry import TrackGeometryWarning
+    from racing_lib.geometry.checks import TrackGeometryWarning
 
     # A circle of radius 80 m every 0.1 m, its coordinates rounded to 6 decimals as in the
     # racetrack-database files.

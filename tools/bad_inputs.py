@@ -58,7 +58,7 @@ def make_files(folder: Path) -> dict[str, Path]:
     """The files the cases refer to: good and damaged plans, bad tracks, a plain file."""
     from racing_lib.planning.trajectory import Trajectory
     from racing_lib.sysid import identified_params
-    from racing_lib.track import load_track
+    from racing_lib.tracks import load_track
 
     folder.mkdir(parents=True, exist_ok=True)
     files = {"file": folder / "a_file.txt"}

@@ -511,8 +511,8 @@ class _MPCBase:
         settings: MPCSettings | None = None,
         band: tuple[np.ndarray, np.ndarray] | None = None,
     ) -> None:
+        from racing_lib.geometry import FrenetTracker
         from racing_lib.model import ModelOptions, ModelParams
-        from racing_lib.track import FrenetTracker
 
         self.settings = settings or MPCSettings()
         self.params = params if params is not None else ModelParams()
@@ -806,7 +806,7 @@ class CoupledMPC(_MPCBase):
     >>> from racing_lib.planning.trajectory import Trajectory
     >>> from racing_lib.sim import SimulatedCar
     >>> from racing_lib.sysid import identified_params
-    >>> from racing_lib.track import load_track
+    >>> from racing_lib.geometry import load_track
     >>> track = load_track("shortcut")
     >>> params = identified_params()
     >>> plan = Trajectory.from_centerline(track, params=params.replace(mu=1.0))

@@ -14,8 +14,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from racing_lib.errors import ControlError
+from racing_lib.geometry import (
+    FrenetTracker,
+    Path,
+)
 from racing_lib.interfaces import Command, Observation
-from racing_lib.track import FrenetTracker, Path
 
 SpeedFunction = Callable[[float], float]
 
@@ -75,7 +78,7 @@ class NominalController:
 
     Examples
     --------
-    >>> from racing_lib.track import load_track
+    >>> from racing_lib.geometry import load_track
     >>> track = load_track("expressway")
     >>> ctrl = NominalController(track.centerline, speed=20.0)
     """

@@ -1,7 +1,7 @@
 """Checks of the exercises of chapter 01 (tracks, the Frenet frame, the kinematic equations).
 
 Exercise notebook: ``exercises/01_frenet.ipynb``. Every check compares the reader's function with
-:mod:`racing_lib.track` or :mod:`racing_lib.model` on the same cases.
+:mod:`racing_lib.geometry` or :mod:`racing_lib.model` on the same cases.
 
 * 1.1 :func:`check_frenet_projection`: Cartesian point (x, y) -> Frenet (s, e_y).
 * 1.2 :func:`check_frenet_to_cartesian`: Frenet (s, e_y) -> Cartesian (x, y).
@@ -33,7 +33,7 @@ _TRACK = "expressway"
 
 @functools.lru_cache(maxsize=1)
 def _track():
-    from racing_lib.track import load_track
+    from racing_lib.tracks import load_track
 
     return load_track(_TRACK)
 
@@ -57,7 +57,7 @@ def check_frenet_projection(frenet_projection) -> CheckResult:
 
     ``s`` (m, in [0, length)) is the arc length of the centerline point closest to (x, y) and
     ``e_y`` (m) the signed distance to it, positive to the left. Compared with
-    :meth:`racing_lib.track.Path.to_frenet` on ten points of the expressway to 1 mm.
+    :meth:`racing_lib.geometry.Path.to_frenet` on ten points of the expressway to 1 mm.
     """
 
     def body() -> str:
@@ -101,7 +101,7 @@ def check_frenet_projection(frenet_projection) -> CheckResult:
 def check_frenet_to_cartesian(frenet_to_cartesian) -> CheckResult:
     """Exercise 1.2: ``frenet_to_cartesian(path, s, e_y) -> (x, y)``.
 
-    Compared with :meth:`racing_lib.track.Path.to_cartesian` on ten points to 1 mm.
+    Compared with :meth:`racing_lib.geometry.Path.to_cartesian` on ten points to 1 mm.
     """
 
     def body() -> str:

@@ -35,7 +35,7 @@ _SPACING = 5.0  # [m] node spacing of the exercise grid
 @functools.lru_cache(maxsize=1)
 def _grid() -> tuple[np.ndarray, np.ndarray, float]:
     """Arc length (m), centerline curvature (1/m) and length (m) of the expressway on a 5 m grid."""
-    from racing_lib.track import load_track
+    from racing_lib.tracks import load_track
 
     path = load_track("expressway").centerline
     s = path.sample(ds=_SPACING)

@@ -32,7 +32,7 @@ _DEG = 180.0 / math.pi
 def _grid():
     """The expressway on a 5 m planning grid."""
     from racing_lib.planning.curvature import TrackGrid
-    from racing_lib.track import load_track
+    from racing_lib.tracks import load_track
 
     return TrackGrid.from_track(load_track("expressway"), spacing=5.0)
 

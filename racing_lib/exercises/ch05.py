@@ -37,7 +37,7 @@ def _mpc():
     """A coupled MPC on the expressway's centerline plan (built once: about 4 s)."""
     from racing_lib.control.mpc import CoupledMPC
     from racing_lib.planning.trajectory import Trajectory
-    from racing_lib.track import load_track
+    from racing_lib.tracks import load_track
 
     track = load_track("expressway")
     return CoupledMPC(Trajectory.from_centerline(track), track=track)

@@ -6,7 +6,7 @@ uses.
 
 Examples
 --------
->>> from racing_lib.track import load_track
+>>> from racing_lib.geometry import load_track
 >>> from racing_lib.planning import plan
 >>> result = plan(load_track("expressway"), method="centerline")
 >>> result.trajectory.method
@@ -181,13 +181,13 @@ def plan(
     """
     import dataclasses
 
-    from racing_lib.track import Track
+    from racing_lib.geometry import Track
 
     t0 = time.perf_counter()
     if not isinstance(track, Track):
         raise PlanningError(
             f"plan needs a racing_lib Track, got {type(track).__name__}; load one with "
-            "racing_lib.track.load_track('expressway') or load_track('my_circuit.csv')."
+            "racing_lib.tracks.load_track('expressway') or load_track('my_circuit.csv')."
         )
     if not (isinstance(spacing, int | float) and 0.5 <= spacing <= 20.0):
         raise PlanningError(

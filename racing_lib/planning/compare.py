@@ -91,14 +91,14 @@ def speed_profile_trajectory(
 
     Examples
     --------
-    >>> from racing_lib.track import load_track
+    >>> from racing_lib.geometry import load_track
     >>> track = load_track("expressway")
     >>> line = track.centerline.position(track.centerline.sample(ds=3.0))
     >>> traj = speed_profile_trajectory(track, line)
     >>> 100.0 < traj.lap_time < 120.0
     True
     """
-    from racing_lib.track import Path
+    from racing_lib.geometry import Path
 
     if not spacing > 0:
         raise PlanningError(f"spacing must be positive, got {spacing!r} m.")

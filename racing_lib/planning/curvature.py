@@ -184,7 +184,7 @@ class TrackGrid:
 
     def line_curvature(self, e_y: np.ndarray) -> np.ndarray:
         """Curvature (1/m) at the nodes of the line with offsets e_y, from a spline through it."""
-        from racing_lib.track import Path
+        from racing_lib.geometry import Path
 
         x, y, _ = self.line_xy(e_y)
         path = Path(x, y, check=False)
@@ -499,7 +499,7 @@ def solve_curvature(
 
     Examples
     --------
-    >>> from racing_lib.track import load_track
+    >>> from racing_lib.geometry import load_track
     >>> res = solve_curvature(load_track("expressway"))  # doctest: +SKIP
     >>> res.iterations, round(res.trajectory.lap_time, 1)  # doctest: +SKIP
     """

@@ -3,8 +3,8 @@
 A trajectory is what every planner returns and what every controller follows: the line (x, y,
 heading, curvature), the states along it (v_x, v_y, yaw rate r), the inputs (a_x, delta) and the
 time t, all sampled at the same nodes, plus where it came from (track, method, model options).
-``trajectory.path`` is the line itself as a :class:`racing_lib.track.Path`, so a controller can use
-it as its Frenet reference.
+``trajectory.path`` is the line itself as a :class:`racing_lib.geometry.Path`, so a controller can
+use it as its Frenet reference.
 
 The arc length ``s`` of a trajectory is measured along its own line (the raceline), not along the
 track centerline the planners work on, so ``trajectory.path`` and ``trajectory.s`` agree.
@@ -176,8 +176,8 @@ class Trajectory:
     # ------------------------------------------------------------------ geometry
     @cached_property
     def path(self):
-        """The line as a closed :class:`racing_lib.track.Path` (built from x, y)."""
-        from racing_lib.track import Path
+        """The line as a closed :class:`racing_lib.geometry.Path` (built from x, y)."""
+        from racing_lib.geometry import Path
 
         try:
             return Path(self.x, self.y)
@@ -401,7 +401,7 @@ class Trajectory:
         The line's arc length, heading and curvature come from a Path through (x, y); ``dt[k]`` is
         the time from node k to node k+1 (the last one closes the lap), s.
         """
-        from racing_lib.track import Path
+        from racing_lib.geometry import Path
 
         x = np.asarray(x, float)
         y = np.asarray(y, float)

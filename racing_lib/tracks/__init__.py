@@ -9,7 +9,8 @@ cached for the rest of the session (generation takes a fraction of a second).
 * ``shortcut``: open circuit, ~3.1 km, 12 m wide, two U corners then sharp corners
   (:mod:`racing_lib.tracks.shortcut`).
 
-Use :func:`racing_lib.track.load_track` to load them by name; make your own with
+The registry: :func:`load_track` loads them by name (or a CSV file), :func:`builtin_track_names`
+lists them; make your own with
 :func:`track_from_segments`. The cached tracks are shared: treat them as read-only.
 Taught in notebook 00.
 """
@@ -17,11 +18,14 @@ Taught in notebook 00.
 from __future__ import annotations
 
 import functools
+import os
 from collections.abc import Callable
+from pathlib import Path as FsPath
 
 import numpy as np
 
-from racing_lib.track import Corner, Path, Track
+from racing_lib.errors import TrackError
+from racing_lib.geometry import Corner, Path, Track
 from racing_lib.tracks import expressway, shortcut
 from racing_lib.tracks.segments import Arc, Straight, build_centerline, track_from_segments
 
@@ -30,11 +34,13 @@ __all__ = [
     "Arc",
     "Straight",
     "build_centerline",
+    "builtin_track_names",
     "circle_track",
     "corner_positions",
     "crucial_corners",
     "expressway_track",
     "figure_eight_track",
+    "load_track",
     "shortcut_track",
     "track_from_segments",
 ]
@@ -59,6 +65,49 @@ BUILTIN: dict[str, Callable[[], Track]] = {
 }
 
 
+def builtin_track_names() -> list[str]:
+    """Names of the built-in tracks, e.g. ``["expressway", "shortcut"]``."""
+    return list(BUILTIN)
+
+
+def load_track(name_or_file: str | os.PathLike) -> Track:
+    """A built-in track by name (case-insensitive) or a track from a CSV file.
+
+    Parameters
+    ----------
+    name_or_file : str, os.PathLike or Track
+        ``"expressway"``, ``"shortcut"``... or a path to a racetrack-database CSV (a Track is
+        returned as it is).
+
+    Raises
+    ------
+    TrackError
+        Unknown name (the message lists the built-in names), or a bad CSV file.
+    """
+    if isinstance(name_or_file, Track):
+        return name_or_file
+    if not isinstance(name_or_file, str | os.PathLike):
+        raise TrackError(
+            f"load_track needs a track name or a CSV path, got {name_or_file!r}; built-in "
+            f"tracks are {', '.join(builtin_track_names())}."
+        )
+    text = os.fspath(name_or_file)
+    key = text.strip().lower()
+    if key in BUILTIN:
+        return BUILTIN[key]()
+    if key.endswith(".csv") or os.sep in text or FsPath(text).exists():
+        if not FsPath(text).exists():
+            raise TrackError(
+                f"Track file {text!r} does not exist; check the path, or use a built-in track "
+                f"name ({', '.join(builtin_track_names())})."
+            )
+        return Track.from_csv(text)
+    raise TrackError(
+        f"Unknown track {text!r}: built-in tracks are {', '.join(builtin_track_names())}; a path "
+        "to a racetrack-database CSV file (.csv) is also accepted."
+    )
+
+
 def figure_eight_track(
     radius: float = 60.0, width: float = 10.0, boundary: str = "walls", name: str = "figure-eight"
 ) -> Track:
@@ -68,7 +117,7 @@ def figure_eight_track(
     degrees, crosses the start again at right angles along a straight of ``2 radius``, turns left
     by 270 degrees and returns to the start: ``(4 + 3 pi) radius`` in all (805 m for 60 m). The
     two stretches through the crossing are half a lap apart, so the centerline's crossing is a
-    bridge (see :class:`racing_lib.track.Path`), not a broken loop.
+    bridge (see :class:`racing_lib.geometry.Path`), not a broken loop.
 
     Parameters
     ----------
@@ -109,7 +158,7 @@ def crucial_corners(track: Track | str) -> tuple[Corner, ...]:
         Empty for tracks that define none (CSV tracks).
     """
     if isinstance(track, str):
-        from racing_lib.track import load_track
+        from racing_lib.tracks import load_track
 
         track = load_track(track)
     return track.corners

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from racing_lib.track import Track
+from racing_lib.geometry import Track
 from racing_lib.tracks.segments import Arc, Straight, track_from_segments
 
 A = Arc.degrees

@@ -32,7 +32,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from racing_lib.errors import TrackError
-from racing_lib.track import Corner, Path, Track
+from racing_lib.geometry import (
+    Corner,
+    Path,
+    Track,
+)
 
 __all__ = [
     "Arc",
@@ -307,7 +311,7 @@ def track_from_segments(
     name: str = "custom",
     corners: Sequence[tuple[str, int | tuple[int, int]]] = (),
 ) -> Track:
-    """A :class:`~racing_lib.track.Track` from a layout of straights and arcs.
+    """A :class:`~racing_lib.geometry.Track` from a layout of straights and arcs.
 
     Parameters
     ----------
@@ -324,7 +328,7 @@ def track_from_segments(
     name : str
     corners : sequence of (label, index) or (label, (first, last))
         Crucial corners as layout segment indices (an arc, or a run of segments such as an
-        S-bend); they become the track's :class:`~racing_lib.track.Corner` list.
+        S-bend); they become the track's :class:`~racing_lib.geometry.Corner` list.
 
     Examples
     --------

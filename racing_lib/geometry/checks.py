@@ -1,7 +1,7 @@
 """Checks of a track's geometry that the file format cannot express: roads that are impossible.
 
 A racetrack-database file is a list of centerline points with two widths each. Three things such a
-file can say are not a road a car can drive, and :class:`racing_lib.track.Track` checks each:
+file can say are not a road a car can drive, and :class:`racing_lib.geometry.Track` checks each:
 
 * **An inner width beyond the turn's radius.** On a turn of radius R, a point at distance n
   towards the inside has the Frenet factor 1 - n / R; at n = R the frame is singular (the
@@ -17,7 +17,7 @@ file can say are not a road a car can drive, and :class:`racing_lib.track.Track`
   (0.04 % at 1 m). Rows closer than
   :data:`MIN_ROW_SPACING` are thinned, with a warning.
 
-Used by :mod:`racing_lib.track`; importable alone (it works on arrays and takes no Track).
+Used by :mod:`racing_lib.geometry`; importable alone (it works on arrays and takes no Track).
 """
 
 from __future__ import annotations
