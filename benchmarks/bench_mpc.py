@@ -28,9 +28,9 @@ import numpy as np
 from racing_lib.control.mpc import CoupledMPC, DecoupledMPC, MPCSettings
 from racing_lib.control.mpc_qp import CvxpyTrackingQP, QPSettings, TrackingQP
 from racing_lib.experiment import run_lap
+from racing_lib.model.identified import identified_params
 from racing_lib.planning.trajectory import Trajectory
 from racing_lib.sim import SimulatedCar
-from racing_lib.sysid import identified_params
 from racing_lib.tracks import load_track
 from racing_lib.tuning import configuration_name, tuned_weights
 

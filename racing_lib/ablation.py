@@ -314,7 +314,7 @@ def _planning_params(row: AblationRow) -> tuple[str, dict[str, Any]]:
         from racing_lib.vehicle import VehicleParams
 
         return "vehicle", dataclasses.asdict(VehicleParams())
-    from racing_lib.sysid import identified_params
+    from racing_lib.model.identified import identified_params
 
     return "identified", identified_params().to_dict()
 
@@ -355,7 +355,7 @@ def _row_key_inputs(
     seeds: Sequence[int],
     code: Mapping[str, str],
 ) -> dict[str, Any]:
-    from racing_lib.sysid import identified_params
+    from racing_lib.model.identified import identified_params
     from racing_lib.vehicle import VehicleParams
 
     cfg = TUNING_CONFIGS[row.config]

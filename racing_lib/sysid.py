@@ -58,7 +58,8 @@ has none, which the result's ``notes`` report.
 
 Examples
 --------
->>> from racing_lib.sysid import collect_logs, identify, identified_params
+>>> from racing_lib.sysid import collect_logs, identify
+>>> from racing_lib.model import identified_params
 >>> from racing_lib.vehicle import VehicleParams
 >>> logs = collect_logs(seed=1, fast=True)              # doctest: +SKIP
 >>> result = identify(logs, truth=VehicleParams())      # doctest: +SKIP
@@ -75,25 +76,24 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import functools
-import json
 import math
 import sys
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from importlib import resources
 from pathlib import Path as FsPath
 from typing import Any, Literal
 
 import numpy as np
 from scipy.optimize import least_squares
-from scipy.signal import lfilter, savgol_filter
+from scipy.signal import savgol_filter
 
 from racing_lib.config import fast_mode
 from racing_lib.errors import ModelError
 from racing_lib.io import atomic_write_json
 from racing_lib.model import ModelParams, PedalMap, X
+from racing_lib.model.actuator import lagged_steering
+from racing_lib.model.identified import DATA_FILE
 from racing_lib.vehicle import (
     axle_cornering_stiffness,
     drag_force,
@@ -112,10 +112,7 @@ __all__ = [
     "coast_down_log",
     "circle_logs",
     "collect_logs",
-    "identified_params",
     "identify",
-    "identified_steer_tau",
-    "lagged_steering",
     "lap_logs",
     "main",
     "pedal_map_r2",
@@ -156,7 +153,6 @@ TOLERANCES: dict[str, float] = {
     "C_alpha_r": 0.20,
 }
 
-_DATA_FILE = "identified_params.json"
 _MIN_SAMPLES = 50  # shortest usable set of samples for any one regression
 _V_MIN = 5.0  # m/s: below this slip angles and drag are too small to be informative
 
@@ -637,38 +633,6 @@ class _Samples:
         for start, stop in self.bounds:
             out[start:stop] = lagged_steering(self.steer[start:stop], tau, dt)
         return out
-
-
-def lagged_steering(steer_cmd: np.ndarray, tau: float, dt: float = 0.1) -> np.ndarray:
-    """Mean road-wheel angle over each control period behind a first-order steering actuator.
-
-    The actual angle obeys ``tau delta_dot = delta_cmd - delta`` with each command held for one
-    period ``dt``; the actuator starts settled at the first command (``delta = delta_cmd[0]``).
-    Used by the identification (the steering lag fit) and by the open-loop predictions of
-    :mod:`racing_lib.analysis`. Taught in notebook 02.
-
-    Parameters
-    ----------
-    steer_cmd : ndarray, shape (N,)
-        Steering commands, rad, command ``k`` held from ``t_k`` to ``t_k + dt``.
-    tau : float
-        Time constant of the lag, s; ``tau <= 1e-4`` returns the commands unchanged.
-    dt : float
-        Control period, s.
-
-    Returns
-    -------
-    ndarray, shape (N,)
-        The exact mean angle over each period, rad.
-    """
-    c = np.asarray(steer_cmd, dtype=float).ravel()
-    if tau <= 1e-4 or c.size == 0:
-        return c.copy()
-    a = math.exp(-dt / tau)
-    nodes, _ = lfilter([1.0 - a], [1.0, -a], c, zi=[a * c[0]])  # delta at k + 1
-    d0 = np.concatenate(([c[0]], nodes[:-1]))  # delta at k
-    # Mean of d0 + (c - d0) (1 - exp(-t / tau)) over the period
-    return c + (d0 - c) * (tau / dt) * (1.0 - a)
 
 
 def _samples(logs: Sequence[DriveLog], derivative: Derivative) -> _Samples:
@@ -1441,38 +1405,6 @@ def identify(
     )
 
 
-def _shipped_fit() -> dict[str, Any]:
-    """The JSON of the shipped fit (``racing_lib/data/identified_params.json``)."""
-    ref = resources.files("racing_lib") / "data" / _DATA_FILE
-    try:
-        return json.loads(ref.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise ModelError(
-            f"racing_lib/data/{_DATA_FILE} is missing; regenerate it with "
-            "`python -m racing_lib.sysid`."
-        ) from None
-
-
-@functools.cache
-def identified_params() -> ModelParams:
-    """The shipped identified parameter set (``racing_lib/data/identified_params.json``).
-
-    The default parameter set of the chapters after notebook 02, so that they need not refit.
-    Regenerate it with ``python -m racing_lib.sysid``.
-    """
-    return ModelParams.from_dict(_shipped_fit()["model_params"])
-
-
-def identified_steer_tau() -> float:
-    """The steering lag time constant of the shipped fit (s), identified with the parameters.
-
-    Not part of :class:`~racing_lib.model.ModelParams` (the planning model has no actuator); the
-    MPC and the open-loop predictions of notebook 02 use it to turn commands into road-wheel
-    angles (see :func:`lagged_steering`).
-    """
-    return float(_shipped_fit()["steer_tau"])
-
-
 def run(seed: int = 0, fast: bool | None = None, out: str | None = None) -> IdentificationResult:
     """Collect logs with the built-in car, identify, and write the JSON parameter file.
 
@@ -1492,7 +1424,7 @@ def run(seed: int = 0, fast: bool | None = None, out: str | None = None) -> Iden
     t_collect = time.perf_counter() - t0
     result = identify(logs, truth=VehicleParams())
     if out != "":
-        target = FsPath(out) if out else FsPath(__file__).parent / "data" / _DATA_FILE
+        target = FsPath(out) if out else FsPath(__file__).parent / "data" / DATA_FILE
         payload = result.to_dict() | {
             "seed": seed,
             "fast": fast_mode() if fast is None else fast,

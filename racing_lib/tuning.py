@@ -1082,7 +1082,8 @@ def config_plan(config: str, track: Any, params: Any = None, **plan_kwargs: Any)
     track : Track
         The track.
     params : ModelParams, optional
-        Planning parameters (default: the identified set, ``racing_lib.sysid.identified_params``).
+        Planning parameters (default: the identified set,
+        ``racing_lib.model.identified.identified_params``).
     **plan_kwargs
         Passed on to :func:`racing_lib.planning.plan`.
 
@@ -1097,8 +1098,8 @@ def config_plan(config: str, track: Any, params: Any = None, **plan_kwargs: Any)
         Unknown configuration, or a plan that did not converge.
     """
     from racing_lib.model import ModelOptions
+    from racing_lib.model.identified import identified_params
     from racing_lib.planning import plan
-    from racing_lib.sysid import identified_params
 
     cfg = _config(config)
     if params is None:
@@ -1133,7 +1134,8 @@ def config_spec(
     track : Track
         The track.
     params : ModelParams, optional
-        Planning parameters (default: the identified set, ``racing_lib.sysid.identified_params``).
+        Planning parameters (default: the identified set,
+        ``racing_lib.model.identified.identified_params``).
     trajectory : Trajectory, optional
         A plan already made for this configuration (for example loaded from a cache): no planning.
     weights : dict, optional

@@ -1,4 +1,4 @@
-"""Tests of racing_lib.analysis against independent truths.
+"""Tests of racing_lib.model.analysis against independent truths.
 
 * The lateral linearization against the classic linear bicycle model written out by hand from the
   axles' cornering stiffnesses (state matrix, input matrix, characteristic polynomial, steady-state
@@ -15,7 +15,9 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from racing_lib.analysis import (
+from racing_lib.errors import ModelError
+from racing_lib.model import VX_GUARD, Model, ModelOptions, ModelParams, X
+from racing_lib.model.analysis import (
     format_prediction_table,
     lateral_analysis,
     lateral_linearization,
@@ -24,8 +26,7 @@ from racing_lib.analysis import (
     prediction_table,
     understeer_gradient,
 )
-from racing_lib.errors import ModelError
-from racing_lib.model import VX_GUARD, VX_GUARD_WIDTH, Model, ModelOptions, ModelParams, X
+from racing_lib.model.equations import VX_GUARD_WIDTH
 from racing_lib.tracks import circle_track
 
 P = ModelParams()

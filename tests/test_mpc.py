@@ -328,7 +328,7 @@ def _plan(track, params):
 
 @pytest.fixture(scope="module")
 def setups():
-    from racing_lib.sysid import identified_params
+    from racing_lib.model.identified import identified_params
     from racing_lib.tracks import load_track
 
     params = identified_params()
@@ -527,7 +527,7 @@ def test_one_build_is_shared_by_processes_and_the_cache_stays_small(tmp_path):
         "from racing_lib.control.mpc import _substep_linearization\n"
         "from racing_lib.jit import cache_dir\n"
         "from racing_lib.model import ModelOptions\n"
-        "from racing_lib.sysid import identified_params\n"
+        "from racing_lib.model import identified_params\n"
         "_substep_linearization(identified_params(), ModelOptions(), 0.1, 2, jit=True)\n"
         "print(cache_dir(), sorted(os.listdir(cache_dir())))\n"
     )

@@ -97,7 +97,7 @@ def test_summary_has_the_fields_of_the_lap_command(curvature_race):
 
 @pytest.fixture(scope="module")
 def stadium():
-    from racing_lib.sysid import identified_params
+    from racing_lib.model.identified import identified_params
     from racing_lib.tracks import Arc, Straight, track_from_segments
 
     track = track_from_segments(

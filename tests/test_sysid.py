@@ -16,12 +16,12 @@ import pytest
 
 from racing_lib.errors import ModelError
 from racing_lib.model import ModelParams
+from racing_lib.model.identified import identified_params
 from racing_lib.sysid import (
     TOLERANCES,
     DriveLog,
     _samples,
     collect_logs,
-    identified_params,
     identify,
     lap_logs,
     pedal_map_r2,
@@ -244,7 +244,7 @@ def test_shipped_parameters_load_and_are_plausible():
 def test_lagged_steering_is_the_analytic_first_order_response():
     # A step from 0 to 0.1 rad at period 1: mean angle over period k >= 1 is
     # 0.1 (1 - exp(-(k-1) dt / tau) tau / dt (1 - exp(-dt / tau))); a constant command is itself.
-    from racing_lib.sysid import lagged_steering
+    from racing_lib.model.actuator import lagged_steering
 
     tau, dt = 0.08, 0.1
     eff = lagged_steering(np.r_[0.0, np.full(5, 0.1)], tau, dt)

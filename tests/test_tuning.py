@@ -380,7 +380,7 @@ def test_tuned_weights_loader():
 
 @pytest.fixture(scope="module")
 def stadium_spec() -> LapSpec:
-    from racing_lib.sysid import identified_params
+    from racing_lib.model.identified import identified_params
     from racing_lib.tracks import Arc, Straight, track_from_segments
 
     track = track_from_segments(

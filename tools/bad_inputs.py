@@ -56,8 +56,8 @@ def _circle(n: int = 120, radius: float = 80.0) -> tuple[np.ndarray, np.ndarray]
 
 def make_files(folder: Path) -> dict[str, Path]:
     """The files the cases refer to: good and damaged plans, bad tracks, a plain file."""
+    from racing_lib.model.identified import identified_params
     from racing_lib.planning.trajectory import Trajectory
-    from racing_lib.sysid import identified_params
     from racing_lib.tracks import load_track
 
     folder.mkdir(parents=True, exist_ok=True)

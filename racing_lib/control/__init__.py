@@ -47,7 +47,7 @@ def build_controller(
         import dataclasses
 
         from racing_lib.control.mpc import CoupledMPC, DecoupledMPC, MPCSettings
-        from racing_lib.sysid import identified_params
+        from racing_lib.model.identified import identified_params
 
         settings = MPCSettings(smooth_transition=smooth_transition)
         if weights:

@@ -805,7 +805,7 @@ class CoupledMPC(_MPCBase):
     --------
     >>> from racing_lib.planning.trajectory import Trajectory
     >>> from racing_lib.sim import SimulatedCar
-    >>> from racing_lib.sysid import identified_params
+    >>> from racing_lib.model import identified_params
     >>> from racing_lib.geometry import load_track
     >>> track = load_track("shortcut")
     >>> params = identified_params()

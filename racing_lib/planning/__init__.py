@@ -208,7 +208,7 @@ def plan(
     say = report or (lambda _line: None)
     _warn_if_large(track, key, spacing, say)
     if params is None:
-        from racing_lib.sysid import identified_params
+        from racing_lib.model.identified import identified_params
 
         params = identified_params()
     if grip_margin:

@@ -80,7 +80,7 @@ def plan_demands(
         The plan.
     params : ModelParams, optional
         The planning model the demands are measured with, at its full (identified) friction
-        (default: ``racing_lib.sysid.identified_params()``).
+        (default: ``racing_lib.model.identified.identified_params()``).
     vehicle : VehicleParams, optional
         The car's actuator and engine (default: the simulated car's ``VehicleParams()``).
     track : Track, optional
@@ -94,7 +94,7 @@ def plan_demands(
     from racing_lib.vehicle import VehicleParams
 
     if params is None:
-        from racing_lib.sysid import identified_params
+        from racing_lib.model.identified import identified_params
 
         params = identified_params()
     vehicle = vehicle if vehicle is not None else VehicleParams()

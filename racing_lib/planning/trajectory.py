@@ -513,7 +513,7 @@ def default_model_inputs(params: Any, pedal_map: Any, options: Any) -> tuple[Any
     unless told otherwise, as the paper planned with its identified model.
     """
     from racing_lib import model
-    from racing_lib.sysid import identified_params
+    from racing_lib.model.identified import identified_params
 
     if params is None:
         params = identified_params()

@@ -30,7 +30,7 @@ import numpy as np
 
 from racing_lib.errors import ModelError
 from racing_lib.model import Model, ModelOptions, ModelParams, U, X
-from racing_lib.sysid import lagged_steering
+from racing_lib.model.actuator import lagged_steering
 
 __all__ = [
     "LateralAnalysis",
@@ -489,7 +489,7 @@ def prediction_errors(
     track : Track
         The track it was driven on.
     params : ModelParams, optional
-        Model parameters (e.g. :func:`racing_lib.sysid.identified_params`).
+        Model parameters (e.g. :func:`racing_lib.model.identified.identified_params`).
     options : ModelOptions, optional
         Model effects (default ``ModelOptions()``).
     horizons : sequence of float
@@ -498,7 +498,7 @@ def prediction_errors(
         Name of the variant (default: ``options.label()``).
     steer_tau : float
         Time constant of the steering actuator, s: commands become road-wheel angles through
-        :func:`racing_lib.sysid.lagged_steering` (0: the command is the angle).
+        :func:`racing_lib.model.actuator.lagged_steering` (0: the command is the angle).
     stride : int
         Use every ``stride``-th observation as a start point.
     v_min : float

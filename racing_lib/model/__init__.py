@@ -1,0 +1,56 @@
+"""The planning and control model: a dynamic bicycle in Frenet coordinates, written once.
+
+* :mod:`racing_lib.model.equations`: the equations (paper Eq. 1-15) as CasADi functions, in the
+  time and the spatial domain, their Jacobians and discretizations; the state and input indices
+  :class:`X` and :class:`U`.
+* :mod:`racing_lib.model.params`: :class:`ModelParams`, :class:`ModelOptions`, :class:`PedalMap`.
+* :mod:`racing_lib.model.numeric`: :class:`Model`, the same equations for NumPy users.
+* :mod:`racing_lib.model.identified`: the shipped identified parameters (chapter 02's fit).
+* :mod:`racing_lib.model.actuator`: the steering lag the model leaves out.
+* :mod:`racing_lib.model.analysis`: linear analysis and open-loop prediction errors.
+
+The names below are re-exported, so ``from racing_lib.model import ModelParams, X`` works.
+Taught in notebook 02.
+"""
+
+from racing_lib.model.equations import (
+    NU,
+    NX,
+    VX_GUARD,
+    U,
+    X,
+    discrete_dynamics,
+    discrete_linearization,
+    discretize,
+    frenet_kinematics,
+    jacobians,
+    model_terms,
+    spatial_dynamics,
+    time_dynamics,
+)
+from racing_lib.model.identified import identified_params, identified_steer_tau
+from racing_lib.model.numeric import Model
+from racing_lib.model.params import BRAKE_KNEE, ModelOptions, ModelParams, PedalMap
+
+__all__ = [
+    "BRAKE_KNEE",
+    "NU",
+    "NX",
+    "VX_GUARD",
+    "Model",
+    "ModelOptions",
+    "ModelParams",
+    "PedalMap",
+    "U",
+    "X",
+    "discrete_dynamics",
+    "discrete_linearization",
+    "discretize",
+    "frenet_kinematics",
+    "identified_params",
+    "identified_steer_tau",
+    "jacobians",
+    "model_terms",
+    "spatial_dynamics",
+    "time_dynamics",
+]

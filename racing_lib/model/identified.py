@@ -1,0 +1,54 @@
+"""The shipped identified parameters: what chapter 02 fitted, for every later chapter.
+
+The file ``racing_lib/data/identified_params.json`` holds the fit of
+:func:`racing_lib.experiments.sysid.identify` on the simulated car's logs; the chapters after 02
+plan and control with it instead of refitting. Regenerate it with
+``python -m racing_lib.experiments.sysid``.
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+from importlib import resources
+from typing import Any
+
+from racing_lib.errors import ModelError
+from racing_lib.model.params import ModelParams
+
+__all__ = ["DATA_FILE", "identified_params", "identified_steer_tau", "shipped_fit"]
+
+#: The shipped fit, in ``racing_lib/data``.
+DATA_FILE = "identified_params.json"
+
+
+def shipped_fit() -> dict[str, Any]:
+    """The JSON of the shipped fit (``racing_lib/data/identified_params.json``)."""
+    ref = resources.files("racing_lib") / "data" / DATA_FILE
+    try:
+        return json.loads(ref.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise ModelError(
+            f"racing_lib/data/{DATA_FILE} is missing; regenerate it with "
+            "`python -m racing_lib.sysid`."
+        ) from None
+
+
+@functools.cache
+def identified_params() -> ModelParams:
+    """The shipped identified parameter set (``racing_lib/data/identified_params.json``).
+
+    The default parameter set of the chapters after notebook 02, so that they need not refit.
+    Regenerate it with ``python -m racing_lib.sysid``.
+    """
+    return ModelParams.from_dict(shipped_fit()["model_params"])
+
+
+def identified_steer_tau() -> float:
+    """The steering lag time constant of the shipped fit (s), identified with the parameters.
+
+    Not part of :class:`~racing_lib.model.ModelParams` (the planning model has no actuator); the
+    MPC and the open-loop predictions of notebook 02 use it to turn commands into road-wheel
+    angles (see :func:`lagged_steering`).
+    """
+    return float(shipped_fit()["steer_tau"])
