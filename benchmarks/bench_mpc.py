@@ -26,7 +26,9 @@ import time
 import numpy as np
 
 from racing_lib.control.mpc import CoupledMPC, DecoupledMPC, MPCSettings
-from racing_lib.control.mpc_qp import CvxpyTrackingQP, QPSettings, TrackingQP
+from racing_lib.control.mpc.qp_cvxpy import CvxpyTrackingQP
+from racing_lib.control.mpc.qp_osqp import TrackingQP
+from racing_lib.control.mpc.qp_problem import QPSettings
 from racing_lib.experiment import run_lap
 from racing_lib.model.identified import identified_params
 from racing_lib.planning.trajectory import Trajectory

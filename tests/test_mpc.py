@@ -19,13 +19,13 @@ from racing_lib.control.mpc import (
     expm_batch,
     steering_lag_coefficients,
 )
-from racing_lib.control.mpc_qp import (
-    CvxpyTrackingQP,
+from racing_lib.control.mpc.qp_cvxpy import CvxpyTrackingQP
+from racing_lib.control.mpc.qp_osqp import TrackingQP
+from racing_lib.control.mpc.qp_problem import (
     QPData,
     QPSettings,
     QPShape,
     QPSolution,
-    TrackingQP,
     tracking_cost,
 )
 from racing_lib.errors import ControlError
@@ -170,14 +170,14 @@ def test_zoh_discretization_is_exact_for_the_linearized_model(circle_setup):
     integration of the *linear* ODE (the ZOH is exact for it)."""
     plan, params = circle_setup
     mpc = CoupledMPC(plan, params=params, settings=MPCSettings(horizon=2, discretization="zoh"))
-    from racing_lib.control.mpc import _continuous_linearization
+    from racing_lib.control.mpc.linearize import continuous_linearization
 
     xi_bar = np.array([20.0, -0.3, 0.25, 0.02, 0.4, 10.0])
     u_bar = np.array([0.04, 0.5])
     A, B, d = mpc.linearize(
         np.tile(xi_bar, (2, 1)), np.tile(u_bar, (2, 1)), np.zeros(2), np.zeros(2)
     )
-    Ac, Bc, c = (np.asarray(v) for v in _continuous_linearization(params, mpc.options)(
+    Ac, Bc, c = (np.asarray(v) for v in continuous_linearization(params, mpc.options)(
         xi_bar, u_bar, 0.0, 0.0))  # fmt: skip
     xi = xi_bar + 0.1
     h = 0.1 / 2000
@@ -524,11 +524,11 @@ def test_one_build_is_shared_by_processes_and_the_cache_stays_small(tmp_path):
 
     code = (
         "import os\n"
-        "from racing_lib.control.mpc import _substep_linearization\n"
+        "from racing_lib.control.mpc.linearize import substep_linearization\n"
         "from racing_lib.jit import cache_dir\n"
         "from racing_lib.model import ModelOptions\n"
         "from racing_lib.model import identified_params\n"
-        "_substep_linearization(identified_params(), ModelOptions(), 0.1, 2, jit=True)\n"
+        "substep_linearization(identified_params(), ModelOptions(), 0.1, 2, jit=True)\n"
         "print(cache_dir(), sorted(os.listdir(cache_dir())))\n"
     )
     work = tmp_path / "work"

@@ -22,6 +22,8 @@ TWO_PI = 2.0 * math.pi
 
 def wrap_angle(a):
     """Wrap an angle (rad, scalar or array) to [-pi, pi)."""
+    if isinstance(a, float):  # the per-step path of the controllers: no array round trip
+        return (a + math.pi) % TWO_PI - math.pi
     return (np.asarray(a) + math.pi) % TWO_PI - math.pi
 
 

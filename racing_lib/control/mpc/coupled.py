@@ -1,0 +1,166 @@
+"""The paper's coupled MPC: one QP over the longitudinal and lateral dynamics, linearized along the
+heuristic trajectory that blends the measured state into the plan.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import numpy as np
+
+from racing_lib.control.mpc.base import MPCBase, PlanTable
+from racing_lib.control.mpc.linearize import augment_steering_lag
+from racing_lib.control.mpc.qp_osqp import TrackingQP
+from racing_lib.control.mpc.qp_problem import (
+    QPData,
+    QPShape,
+)
+from racing_lib.control.mpc.settings import COUPLED_STATES, MX, MPCSettings
+from racing_lib.interfaces import Command
+from racing_lib.model import NU, U, X
+
+__all__ = ["CoupledMPC"]
+
+
+class CoupledMPC(MPCBase):
+    """The paper's coupled MPC: one QP for steering and longitudinal acceleration.
+
+    Parameters
+    ----------
+    plan : Trajectory
+        The planned trajectory; ``plan.path`` is the Frenet reference line.
+    params : ModelParams, optional
+        Parameters of the control model (default ``ModelParams()``).
+    options : ModelOptions, optional
+        Effects in the control model (default: drag and longitudinal load transfer).
+    pedal_map : PedalMap, optional
+        Map between pedal and ``a_x`` (default ``params.pedal``): gives the ``a_x`` bounds and
+        turns the solved ``a_x`` into a pedal command.
+    track : Track, optional
+        Gives the e_y band (track edges relative to the plan, minus half the car width and the
+        margin) and the road pitch. Without it the band is open and the road flat.
+    settings : MPCSettings, optional
+        Horizon, weights, margins, fallbacks, QP settings.
+    band : (band_min, band_max), optional
+        Override of the e_y band per plan node (or scalars), m.
+
+    Examples
+    --------
+    >>> from racing_lib.planning.trajectory import Trajectory
+    >>> from racing_lib.sim import SimulatedCar
+    >>> from racing_lib.model import identified_params
+    >>> from racing_lib.geometry import load_track
+    >>> track = load_track("shortcut")
+    >>> params = identified_params()
+    >>> plan = Trajectory.from_centerline(track, params=params.replace(mu=1.0))
+    >>> mpc = CoupledMPC(plan, params=params, track=track)
+    >>> car = SimulatedCar(track, start_speed=float(plan.vx[0]))
+    >>> obs = car.reset(seed=0)
+    >>> mpc.reset(obs)
+    >>> cmd = mpc.step(obs)
+    >>> bool(-1.0 <= cmd.pedal <= 1.0 and abs(cmd.steer) <= mpc.settings.steer_max)
+    True
+    >>> mpc.stats()
+    {'qp_failures': 0.0, 'fallback_shifted': 0.0, 'fallback_brake': 0.0, 'qp_rescues': 0.0}
+
+    A whole lap: ``racing_lib.experiment.run_lap(car, mpc, plan, track=track, seed=0)``.
+    """
+
+    def __init__(self, plan: Any, params: Any = None, options: Any = None, pedal_map: Any = None,
+                 track: Any = None, settings: MPCSettings | None = None,
+                 band: tuple[np.ndarray, np.ndarray] | None = None) -> None:  # fmt: skip
+        super().__init__(plan, params, options, pedal_map, track, settings, band)
+        st = self.settings
+        shape = QPShape.make(
+            n_state=len(MX),
+            n_input=NU,
+            horizon=st.horizon,
+            state_weights=st.state_weights(),
+            rate_weights=[st.w_ddelta, st.w_dax],
+            rate_limits=[st.steer_rate_max * st.dt, np.inf],
+            band_index=MX.EY,
+            slack_linear=st.slack_linear,
+            slack_quadratic=st.slack_quadratic,
+        )
+        self.qp = TrackingQP(shape, st.qp)
+        self._qp_list = [self.qp]
+        self._lam_used = self._lam if st.smooth_transition else np.zeros_like(self._lam)
+        self._shift_buffer = []
+
+    @property
+    def blend_weights(self) -> np.ndarray:
+        """``lambda_k``, k = 0..N, of the heuristic trajectory: 1 falling linearly to 0 (all 0
+        without the smooth transition), shape (N+1,)."""
+        return self._lam_used.copy()
+
+    def heuristic_trajectory(self, xi0: np.ndarray, xi_ref: np.ndarray) -> np.ndarray:
+        """The states the model is linearized at: ``xi_hat_k = xi_ref_k + lambda_k (xi0 -
+        xi_ref_0)`` (the paper's heuristic trajectory).
+
+        Parameters
+        ----------
+        xi0 : ndarray (6,)
+            The car's state (order of :class:`racing_lib.model.X`).
+        xi_ref : ndarray (N+1, 6)
+            The plan at stages 0..N (:meth:`reference`).
+
+        Returns
+        -------
+        ndarray (N+1, 6)
+            From the measured state at stage 0 to the plan at stage N.
+        """
+        return xi_ref + self._lam_used[:, None] * (xi0 - xi_ref[0])[None, :]
+
+    def step(self, obs: Any) -> Command:
+        """One control period: project, build the QP along the heuristic trajectory, solve."""
+        st = self.settings
+        N = st.horizon
+        t0 = time.perf_counter()
+        xi0 = self.current_state(obs)
+        t1 = time.perf_counter()
+        xi_ref, u_ref, rows = self.reference(xi0[X.S])
+        xi_hat = self.heuristic_trajectory(xi0, xi_ref)
+        # The same transition for the inputs, from the last command to the plan's: linearizing
+        # at the plan's steering while the front tires are working at a very different angle
+        # gets the sign of the tire-force slope wrong when the car is near the grip limit.
+        u_hat = u_ref + self._lam_used[:, None] * (self._u_prev - u_ref[0])[None, :]
+        kappa = rows[:N, PlanTable.KAPPA]
+        theta = rows[:N, PlanTable.THETA]
+        # State-dependent a_x limits at the heuristic states, stages 0..N-1.
+        a_min, a_max = self.ax_limits(xi_hat[:N])
+        u_min = np.column_stack([np.full(N, -st.steer_max), a_min])
+        u_max = np.column_stack([np.full(N, st.steer_max), a_max])
+        # Linearize only at inputs the QP may choose: after a hard brake (or a fallback) the last
+        # a_x can lie far outside this step's bounds, and the tyre slopes there made the
+        # prediction unstable enough for OSQP to report the QP infeasible.
+        u_lin = np.clip(u_hat[:N], u_min, u_max)
+        t2 = time.perf_counter()
+        A, B, d = self.linearize(xi_hat[:N], u_lin, kappa, theta)
+        t3 = time.perf_counter()
+        idx = COUPLED_STATES
+        A_q, B_q, d_q = augment_steering_lag(
+            A[:, idx[:, None], idx[None, :]], B[:, idx, :], d[:, idx], U.DELTA, st.steer_tau, st.dt
+        )
+        x_ref = np.zeros((N, len(MX)))
+        x_ref[:, : len(idx)] = xi_ref[1:, idx]
+        data = QPData(
+            x0=np.append(xi0[idx], self._delta_est),
+            A=A_q,
+            B=B_q,
+            d=d_q,
+            x_ref=x_ref,
+            u_prev=self._u_prev,
+            u_min=u_min,
+            u_max=u_max,
+            band_min=rows[1:, PlanTable.BMIN],
+            band_max=rows[1:, PlanTable.BMAX],
+        )
+        t3b = time.perf_counter()
+        sol = self.qp.solve(data)
+        t4 = time.perf_counter()
+        self.last_qp_data = data
+        self.last_solution = sol
+        cmd = self._conclude(sol.u if sol.success else None, sol.status, xi0, u_ref[0])
+        self._record_timing(t0, t1, t2, t3, t3b, t4)
+        return cmd
