@@ -1,4 +1,5 @@
-"""Tests of racing_lib.sysid: identification against the simulated car's true parameters.
+"""Tests of racing_lib.experiments.sysid: identification against the simulated car's true
+parameters.
 
 The truths are independent of the identification code: the simulated car's ``VehicleParams`` (a
 different, higher-fidelity model than the one identified), analytic derivatives and the analytic
@@ -15,17 +16,17 @@ import numpy as np
 import pytest
 
 from racing_lib.errors import ModelError
-from racing_lib.model import ModelParams
-from racing_lib.model.identified import identified_params
-from racing_lib.sysid import (
+from racing_lib.experiments.sysid import (
     TOLERANCES,
     DriveLog,
-    _samples,
     collect_logs,
     identify,
     lap_logs,
     pedal_map_r2,
 )
+from racing_lib.experiments.sysid.samples import _samples
+from racing_lib.model import ModelParams
+from racing_lib.model.identified import identified_params
 from racing_lib.vehicle import VehicleParams
 
 SEED = 7  # fresh data: the shipped parameter file was fitted with seed 0
@@ -229,7 +230,9 @@ def test_shipped_parameters_come_from_the_current_car():
     shipped = data["vehicle_params"]
     current = json.loads(json.dumps(dataclasses.asdict(VehicleParams())))  # tuples -> lists
     changed = sorted(k for k in current if shipped.get(k) != current[k])
-    assert not changed, f"VehicleParams changed ({changed}): run `python -m racing_lib.sysid`"
+    assert not changed, (
+        f"VehicleParams changed ({changed}): run `python -m racing_lib.experiments.sysid`"
+    )
 
 
 def test_shipped_parameters_load_and_are_plausible():

@@ -23,7 +23,7 @@ SECTIONS = [
     ("The car: parameters, force laws, equations of motion", ["racing_lib.vehicle"]),
     (
         "The planning and control model",
-        ["racing_lib.model", "racing_lib.sysid", "racing_lib.model.analysis"],
+        ["racing_lib.model", "racing_lib.experiments.sysid", "racing_lib.model.analysis"],
     ),
     ("What plants and controllers exchange", ["racing_lib.interfaces"]),
     ("The simulated car", ["racing_lib.sim"]),

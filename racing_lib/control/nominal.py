@@ -78,7 +78,7 @@ class NominalController:
 
     Examples
     --------
-    >>> from racing_lib.geometry import load_track
+    >>> from racing_lib.tracks import load_track
     >>> track = load_track("expressway")
     >>> ctrl = NominalController(track.centerline, speed=20.0)
     """

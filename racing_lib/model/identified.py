@@ -11,15 +11,27 @@ from __future__ import annotations
 import functools
 import json
 from importlib import resources
+from pathlib import Path
 from typing import Any
 
 from racing_lib.errors import ModelError
 from racing_lib.model.params import ModelParams
 
-__all__ = ["DATA_FILE", "identified_params", "identified_steer_tau", "shipped_fit"]
+__all__ = [
+    "DATA_FILE",
+    "identified_params",
+    "identified_steer_tau",
+    "shipped_fit",
+    "shipped_fit_path",
+]
 
 #: The shipped fit, in ``racing_lib/data``.
 DATA_FILE = "identified_params.json"
+
+
+def shipped_fit_path() -> Path:
+    """Where the shipped fit lives: ``racing_lib/data/identified_params.json`` in the package."""
+    return Path(__file__).resolve().parents[1] / "data" / DATA_FILE
 
 
 def shipped_fit() -> dict[str, Any]:
@@ -30,7 +42,7 @@ def shipped_fit() -> dict[str, Any]:
     except FileNotFoundError:
         raise ModelError(
             f"racing_lib/data/{DATA_FILE} is missing; regenerate it with "
-            "`python -m racing_lib.sysid`."
+            "`python -m racing_lib.experiments.sysid`."
         ) from None
 
 
@@ -39,7 +51,7 @@ def identified_params() -> ModelParams:
     """The shipped identified parameter set (``racing_lib/data/identified_params.json``).
 
     The default parameter set of the chapters after notebook 02, so that they need not refit.
-    Regenerate it with ``python -m racing_lib.sysid``.
+    Regenerate it with ``python -m racing_lib.experiments.sysid``.
     """
     return ModelParams.from_dict(shipped_fit()["model_params"])
 

@@ -105,7 +105,7 @@ class PedalMap:
     ``BRAKE_KNEE a_brk_max`` and bends linearly from there to ``a_brk_max`` at ``u_p = -1``:
     continuous, monotone and invertible, and close to an anti-lock system that gives less and
     less extra deceleration per unit of pedal as it nears the grip. The defaults are placeholders of
-    plausible size for the default car; ``racing_lib.sysid`` fits the real coefficients.
+    plausible size for the default car; ``racing_lib.experiments.sysid`` fits the real coefficients.
 
     Attributes
     ----------

@@ -6,7 +6,7 @@ uses.
 
 Examples
 --------
->>> from racing_lib.geometry import load_track
+>>> from racing_lib.tracks import load_track
 >>> from racing_lib.planning import plan
 >>> result = plan(load_track("expressway"), method="centerline")
 >>> result.trajectory.method

@@ -91,7 +91,7 @@ def speed_profile_trajectory(
 
     Examples
     --------
-    >>> from racing_lib.geometry import load_track
+    >>> from racing_lib.tracks import load_track
     >>> track = load_track("expressway")
     >>> line = track.centerline.position(track.centerline.sample(ds=3.0))
     >>> traj = speed_profile_trajectory(track, line)

@@ -499,7 +499,7 @@ def solve_curvature(
 
     Examples
     --------
-    >>> from racing_lib.geometry import load_track
+    >>> from racing_lib.tracks import load_track
     >>> res = solve_curvature(load_track("expressway"))  # doctest: +SKIP
     >>> res.iterations, round(res.trajectory.lap_time, 1)  # doctest: +SKIP
     """

@@ -501,7 +501,7 @@ def solve_time_optimal(
 
     Examples
     --------
-    >>> from racing_lib.geometry import load_track
+    >>> from racing_lib.tracks import load_track
     >>> res = solve_time_optimal(load_track("expressway"))  # doctest: +SKIP
     >>> res.status, res.iterations, round(res.lap_time, 2)  # doctest: +SKIP
     """

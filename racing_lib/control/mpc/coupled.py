@@ -50,7 +50,7 @@ class CoupledMPC(MPCBase):
     >>> from racing_lib.planning.trajectory import Trajectory
     >>> from racing_lib.sim import SimulatedCar
     >>> from racing_lib.model import identified_params
-    >>> from racing_lib.geometry import load_track
+    >>> from racing_lib.tracks import load_track
     >>> track = load_track("shortcut")
     >>> params = identified_params()
     >>> plan = Trajectory.from_centerline(track, params=params.replace(mu=1.0))

@@ -83,8 +83,8 @@ class MPCSettings:
         the closed loop oscillate. ``inf`` removes it.
     steer_tau : float
         Time constant of the steering actuator's first-order lag, s (the simulated car's is
-        0.08 s; ``racing_lib.sysid`` identifies it). The QP carries the actual steering angle
-        as an extra state so that it knows a command acts only partly within the first period
+        0.08 s; ``racing_lib.experiments.sysid`` identifies it). The QP carries the actual steering
+        angle as an extra state so that it knows a command acts only partly within the first period
         (see :func:`augment_steering_lag`). 0 removes the lag model. At 45 m/s an unmodelled
         0.08 s lag was enough to make the closed loop oscillate and spin the car.
     smooth_transition : bool

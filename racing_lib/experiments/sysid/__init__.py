@@ -1,0 +1,122 @@
+"""System identification: the planning model's parameters from logs of the (simulated) car.
+
+Taught in notebook 02 ("identifying the race vehicle model"). The paper identified its model from
+data driven in Gran Turismo Sport with a simple nominal controller; we do the same with the
+simulated car of :mod:`racing_lib.sim` (or any other :class:`~racing_lib.interfaces.Plant`: see
+:func:`collect_logs`), which is deliberately *not* the planning model (combined
+slip, load-sensitive tyres, gears, power limit, steering lag), so the identified parameters are the
+best planning-model fit to a different car -- as they were in the paper.
+
+What a user of a real car has, and all we use: time, position, yaw, the body-frame velocities
+``v_x, v_y``, the yaw rate ``r`` (the spatial observations of
+:class:`~racing_lib.interfaces.Observation`), the commands sent (steering command and pedal), and
+the track map (road pitch ``theta`` at the car's position). The car's internals (``state_info()``:
+gear, actual steering angle, ...) are never used; only the report compares against the true
+:class:`~racing_lib.vehicle.VehicleParams`.
+
+Taken as known (the paper lists them as the car's data sheet): ``m, l_f, l_r, h_c, l_t, mu, g``.
+Identified, in this order (each step uses the ones before it):
+
+1. **Tyres, steady state** (constant-radius circles): with ``r_dot ~ 0`` the yaw-moment balance
+   (Eq. 8) splits the measured lateral force ``m a_y`` between the axles without ``I_zz``:
+   ``F_yf cos(delta) = m a_y l_r / L``, ``F_yr = m a_y l_f / L``. Each axle's force per unit load
+   against its slip angle (Eq. 11) is fitted with the simplified Pacejka law (Eq. 9-10) by nonlinear
+   least squares: ``B, C, D`` front and rear (``mu`` known, so ``D`` is the peak factor).
+2. **Steering lag and yaw inertia, transients** (steering steps): the time constant of the
+   steering actuator (a first-order lag of the command; the real angle is not observed) from the
+   lateral balance ``m a_y = F_yf cos(delta) + F_yr`` (one-parameter nonlinear least squares), then
+   ``I_zz`` by linear least squares from the yaw balance with the front force eliminated through the
+   measured lateral balance, ``I_zz r_dot = l_f m a_y - L F_yr``. This form matters: the steering
+   actuator's noise and lag act on the front axle, and with the front force eliminated they appear
+   identically on both sides instead of only in ``r_dot`` (which biased ``I_zz`` 10 % low).
+3. **Drag and rolling resistance** (coast-down, pedal 0): ``v_x_dot - r v_y + F_yf sin(delta)/m +
+   g sin(theta) = -C_xw v_x^2 / m - c_rr g cos(theta)`` by linear least squares.
+4. **Pedal map** (Appendix C; laps and pedal steps): the tyre acceleration
+   ``a_x = v_x_dot - r v_y + (C_xw v_x^2 + R_x + F_yf sin(delta))/m + g sin(theta)``
+   against ``[1, v_x, max(u_p, 0), min(u_p, 0)]`` by linear least squares
+   (:class:`~racing_lib.model.PedalMap`).
+
+Derivatives. The commands are held constant over each 0.1 s control period (zero-order hold) and
+the plant is integrated finely in between, so the observed states are exact samples of a smooth
+trajectory whose derivatives jump at every command change. The *interval* difference
+``(v[k+1] - v[k]) / dt`` is then exactly the mean acceleration over the period in which command
+``k`` acted, and we pair it with the period's mean state ``(v[k] + v[k+1]) / 2`` (trapezoid, second
+order). A central difference or a Savitzky-Golay filter would blend two or more commands into one
+derivative, which biases the pedal map and smears steering steps; they are the right choice only for
+noisy measurements. The observations of the simulated car carry no measurement noise (its randomness
+is in the actuation), so ``derivative="interval"`` is the default and ``derivative="savgol"``
+(window 7, quadratic) is offered for noisy logs of other plants. On the same fast-mode data (seed 3)
+the interval differences gave ``C_xw`` -0.0 % and ``I_zz`` -2.5 %, Savitzky-Golay -4.0 % and
++13 % (it smears the throttle-to-coast switch and the steering steps).
+
+Data selection. Samples with the car sliding (``|v_y| > 0.1 v_x``) and the first second of each log
+(unknown actuator state) are dropped everywhere; the tyre, lag and inertia fits use only the
+designed manoeuvres (``circles``, ``steps``) with little longitudinal acceleration
+(``|v_x_dot| < 1.5 m/s^2``), because the simulated tyres share their friction between the
+longitudinal and lateral forces and laps contain wall contacts the logs cannot flag. The coast-down
+also tests for engine braking at pedal 0 (a deceleration term linear in speed); the simulated car
+has none, which the result's ``notes`` report.
+
+Examples
+--------
+>>> from racing_lib.experiments.sysid import collect_logs, identify
+>>> from racing_lib.model import identified_params
+>>> from racing_lib.vehicle import VehicleParams
+>>> logs = collect_logs(seed=1, fast=True)              # doctest: +SKIP
+>>> result = identify(logs, truth=VehicleParams())      # doctest: +SKIP
+>>> print(result.report())                              # doctest: +SKIP
+>>> params = identified_params()   # the shipped fit (seed 0), what later chapters use
+>>> params.pedal.m_brk > params.pedal.m_thr > 0
+True
+
+Modules: :mod:`~racing_lib.experiments.sysid.manoeuvres` (what is driven, on any plant),
+:mod:`~racing_lib.experiments.sysid.samples` (logs to samples),
+:mod:`~racing_lib.experiments.sysid.lateral` and :mod:`~racing_lib.experiments.sysid.longitudinal`
+(the fits), :mod:`~racing_lib.experiments.sysid.identify` (the whole identification and its
+report). Regenerate the shipped fit with ``python -m racing_lib.experiments.sysid``.
+
+Bad input raises :class:`~racing_lib.errors.ModelError` naming the parameter that cannot be
+determined and the manoeuvre that would determine it (see :data:`MANOEUVRES`).
+"""
+
+from racing_lib.experiments.sysid.identify import (
+    TOLERANCES,
+    IdentificationResult,
+    identify,
+    main,
+    run,
+)
+from racing_lib.experiments.sysid.longitudinal import pedal_map_r2
+from racing_lib.experiments.sysid.manoeuvres import (
+    MANOEUVRES,
+    CarUnderTest,
+    DriveLog,
+    braking_logs,
+    circle_logs,
+    coast_down_log,
+    collect_logs,
+    lap_logs,
+    simulated_car,
+    step_logs,
+)
+from racing_lib.experiments.sysid.samples import FitStats
+
+__all__ = [
+    "MANOEUVRES",
+    "CarUnderTest",
+    "TOLERANCES",
+    "DriveLog",
+    "FitStats",
+    "IdentificationResult",
+    "braking_logs",
+    "circle_logs",
+    "coast_down_log",
+    "collect_logs",
+    "identify",
+    "lap_logs",
+    "main",
+    "pedal_map_r2",
+    "run",
+    "simulated_car",
+    "step_logs",
+]

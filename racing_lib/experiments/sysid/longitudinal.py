@@ -1,0 +1,225 @@
+"""The longitudinal fits: drag and rolling resistance from the coast-down, the pedal map from laps
+and pedal steps, the braking limit from full stops.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from racing_lib.experiments.sysid.lateral import _front_force_sin
+from racing_lib.experiments.sysid.manoeuvres import DriveLog
+from racing_lib.experiments.sysid.samples import (
+    _MIN_SAMPLES,
+    _V_MIN,
+    FitStats,
+    _check_regressor,
+    _condition,
+    _missing,
+    _r2,
+    _rms,
+    _Samples,
+    _samples,
+    _subset,
+)
+from racing_lib.model import ModelParams, PedalMap, X
+from racing_lib.vehicle import (
+    drag_force,
+    rolling_resistance,
+)
+
+__all__ = ["pedal_map_r2"]
+
+
+def _fit_coast_down(
+    kp: ModelParams, S: _Samples, fyf_sin: np.ndarray
+) -> tuple[dict[str, float], dict[str, FitStats]]:
+    """Step 3: C_xw and c_rr from the pedal-0 samples of coast-downs (linear least squares)."""
+    cd = S.valid & (S.kind == "coast-down") & (S.pedal == 0.0) & (S.vx > _V_MIN)
+    n = int(np.count_nonzero(cd))
+    v = S.vx[cd]
+    if n < _MIN_SAMPLES:
+        raise _missing(
+            "the drag C_xw and rolling resistance c_rr",
+            f"only {n} pedal-0 coast-down samples above {_V_MIN:.0f} m/s (need >= {_MIN_SAMPLES})",
+            "coast-down",
+        )
+    spread = (np.max(v**2) - np.min(v**2)) / np.max(v**2)
+    if spread < 0.5:
+        raise _missing(
+            "the drag C_xw and rolling resistance c_rr",
+            f"the coast-down speed only spans {np.min(v):.1f}-{np.max(v):.1f} m/s: at "
+            "near-constant speed drag (v^2) and rolling resistance (constant) cannot be told apart",
+            "coast-down",
+        )
+    # Measured resistance: what is left of v_x_dot after the kinematic, steering and grade terms.
+    y = S.dvx[cd] - S.r[cd] * S.vy[cd] + fyf_sin[cd] / kp.m + kp.g * np.sin(S.theta[cd])
+    A = np.column_stack(
+        [
+            -drag_force(v, 1.0) / kp.m,  # per unit C_xw
+            -rolling_resistance(kp.m * kp.g * np.cos(S.theta[cd]), 1.0) / kp.m,  # per unit c_rr
+        ]
+    )
+    cond = _check_regressor(A, ["v_x^2 (drag)", "1 (rolling)"], "C_xw and c_rr", "coast-down")
+    coef, *_ = np.linalg.lstsq(A, y, rcond=None)
+    e = y - A @ coef
+    # Engine braking check: a powertrain that drags at pedal 0 adds a deceleration growing with
+    # engine speed, i.e. roughly linear in v_x within a gear. Fit that term too; if it matters, keep
+    # drag and rolling resistance from the extended fit and leave the engine braking to the pedal
+    # map's state term m_0 + m_vx v_x (the measured a_x the map is fitted to includes it). Its
+    # constant part cannot be told apart from rolling resistance with pedal-0 data alone.
+    A3 = np.column_stack([A, v])
+    coef3, *_ = np.linalg.lstsq(A3, y, rcond=None)
+    e3 = y - A3 @ coef3
+    linear = float(coef3[2] * np.mean(v))  # m/s^2 at the mean coast-down speed
+    engine_braking = abs(linear) > 0.01 and _rms(e3) < 0.8 * _rms(e)
+    if engine_braking:
+        coef, e = coef3[:2], e3
+        cond = _condition(A3)
+        note = (
+            f"engine braking at pedal 0 detected (speed-linear deceleration {linear:+.3f} m/s^2 at "
+            f"{np.mean(v):.0f} m/s): drag and rolling resistance from the extended coast-down fit; "
+            "the engine braking is left to the pedal map's state term"
+        )
+    else:
+        note = (
+            f"no engine braking at pedal 0 (speed-linear term {linear:+.4f} m/s^2 at "
+            f"{np.mean(v):.0f} m/s, below 0.01): the coast-down is drag + rolling resistance only"
+        )
+    stats = {"coast-down": FitStats("coast-down", n, _rms(e), "m/s^2", _r2(y, e), cond)}
+    return {"C_xw": float(coef[0]), "c_rr": float(coef[1]), "note": note}, stats
+
+
+def _pedal_regressor(S: _Samples, v_corner: float | None) -> np.ndarray:
+    """Columns ``1, v_x, max(u_p, 0) min(1, v_corner / v_x), min(u_p, 0)``.
+
+    For a fixed corner speed ``v_corner`` (where the power hyperbola meets the torque-limited
+    gain ``m_thr``) the map is linear in its coefficients; None: no power limit.
+    """
+    throttle = np.maximum(S.pedal, 0.0)
+    if v_corner is not None:
+        throttle = throttle * np.minimum(1.0, v_corner / np.maximum(S.vx, 1.0))
+    return np.column_stack([np.ones_like(S.vx), S.vx, throttle, np.minimum(S.pedal, 0.0)])
+
+
+def _best_corner_speed(S: _Samples, y: np.ndarray) -> float | None:
+    """The corner speed ``p_thr / m_thr`` (m/s) that fits ``y`` best, or None for no power limit.
+
+    A one-dimensional search (the rest is linear least squares): a grid, then a bounded refinement.
+    None when the best corner lies above the data's speeds, i.e. the engine never ran out of power.
+    """
+    from scipy.optimize import minimize_scalar
+
+    def sse(v_corner: float) -> float:
+        A = _pedal_regressor(S, v_corner)
+        coef, *_ = np.linalg.lstsq(A, y, rcond=None)
+        return float(np.sum((y - A @ coef) ** 2))
+
+    v_top = float(np.percentile(S.vx[S.pedal > 0.2], 95))
+    grid = np.geomspace(3.0, max(v_top, 4.0), 40)
+    costs = [sse(v) for v in grid]
+    k = int(np.argmin(costs))
+    if k == grid.size - 1:
+        return None
+    lo, hi = grid[max(k - 1, 0)], grid[min(k + 1, grid.size - 1)]
+    return float(minimize_scalar(sse, bounds=(lo, hi), method="bounded").x)
+
+
+def _tyre_ax(kp: ModelParams, S: _Samples, fyf_sin: np.ndarray) -> np.ndarray:
+    """Measured tyre acceleration a_x (m/s^2): Eq. 5 solved for a_x."""
+    resist = drag_force(S.vx, kp.C_xw) + rolling_resistance(kp.m * kp.g * np.cos(S.theta), kp.c_rr)
+    return S.dvx - S.r * S.vy + (resist + fyf_sin) / kp.m + kp.g * np.sin(S.theta)
+
+
+def _fit_pedal(
+    kp: ModelParams, S: _Samples, fyf_sin: np.ndarray
+) -> tuple[PedalMap, dict[str, FitStats]]:
+    """Step 4: the pedal map by linear least squares, with a held-out R^2."""
+    # Stops at full brake are saturated by the tyres, not by the brakes: they are for the
+    # braking limit (_fit_brake_limit), not for the slope.
+    use = S.valid & (S.vx > 3.0) & (S.kind != "braking")
+    thr = np.count_nonzero(use & (S.pedal > 0.2))
+    brk = np.count_nonzero(use & (S.pedal < -0.2))
+    if thr < 20 or brk < 20:
+        raise _missing(
+            "the pedal map (throttle and brake slopes)",
+            f"{thr} throttle samples (u_p > 0.2) and {brk} brake samples (u_p < -0.2); each "
+            "needs >= 20",
+            "steps",
+        )
+    idx = np.flatnonzero(use)
+    Su = _subset(S, idx)
+    y = _tyre_ax(kp, Su, fyf_sin[idx])
+    v_corner = _best_corner_speed(Su, y)
+    A = _pedal_regressor(Su, v_corner)
+    names = ["1", "v_x", "max(u_p, 0) (power-limited)", "min(u_p, 0)"]
+    cond = _check_regressor(A, names, "the pedal map", "steps")
+    # Hold out every fifth block of 50 periods (5 s) to judge the map on data it was not fit to.
+    test = (np.arange(idx.size) // 50) % 5 == 4
+    coef_train, *_ = np.linalg.lstsq(A[~test], y[~test], rcond=None)
+    e_test = y[test] - A[test] @ coef_train
+    coef, *_ = np.linalg.lstsq(A, y, rcond=None)
+    e = y - A @ coef
+    if coef[2] <= 0.0 or coef[3] <= 0.0:
+        raise _missing(
+            "the pedal map",
+            f"the fitted throttle/brake slopes ({coef[2]:.3g}, {coef[3]:.3g} m/s^2) are not both "
+            "positive",
+            "steps",
+        )
+    m_xi = np.zeros(len(X))
+    m_xi[X.VX] = coef[1]  # only the speed drives the powertrain; other states would fit noise
+    p_thr = None if v_corner is None else float(coef[2] * v_corner)
+    pedal = PedalMap(m_0=coef[0], m_xi=tuple(m_xi), m_thr=coef[2], m_brk=coef[3], p_thr=p_thr)
+    stats = {
+        "pedal map": FitStats("pedal map", idx.size, _rms(e), "m/s^2", _r2(y, e), cond),
+        "pedal map (held out)": FitStats(
+            "pedal map (held out)",
+            int(np.count_nonzero(test)),
+            _rms(e_test),
+            "m/s^2",
+            _r2(y[test], e_test),
+            cond,
+        ),
+    }
+    return pedal, stats
+
+
+def _fit_brake_limit(kp: ModelParams, S: _Samples, fyf_sin: np.ndarray) -> tuple[float | None, str]:
+    """Step 4b: the tyres' deceleration limit (m/s^2) from the full stops, or None without them.
+
+    The median tyre deceleration over the full-brake samples above 10 m/s (below, the brakes
+    fade out towards standstill).
+    """
+    idx = np.flatnonzero(S.valid & (S.kind == "braking") & (S.pedal <= -0.999) & (S.vx > 10.0))
+    if idx.size < _MIN_SAMPLES:
+        return None, (
+            f"no braking limit: {idx.size} full-brake samples above 10 m/s (need >= "
+            f"{_MIN_SAMPLES}); add the 'braking' manoeuvre to bound a_min by the tyres"
+        )
+    decel = -_tyre_ax(kp, _subset(S, idx), fyf_sin[idx])
+    limit = float(np.median(decel))
+    spread = float(np.percentile(decel, 90) - np.percentile(decel, 10))
+    return limit, (
+        f"braking limit {limit:.2f} m/s^2 from {idx.size} full-brake samples "
+        f"(10-90 % spread {spread:.2f} m/s^2)"
+    )
+
+
+def pedal_map_r2(params: ModelParams, logs: Sequence[DriveLog], steer_tau: float = 0.0) -> float:
+    """R^2 of ``params.pedal`` predicting the measured tyre acceleration a_x of ``logs``.
+
+    Uses the same measured a_x as the fit (Eq. 5 solved for a_x with ``params``' drag, rolling
+    resistance and tyres); pass logs the map was not fitted to for an honest score.
+    """
+    S = _samples(logs, "interval")
+    tyres = {k: getattr(params, k) for k in ("B_f", "C_f", "D_f")}
+    tyres["steer_tau"] = steer_tau
+    fyf_sin = _front_force_sin(params, S, tyres)
+    idx = np.flatnonzero(S.valid & (S.vx > 3.0))
+    S = _subset(S, idx)
+    y = _tyre_ax(params, S, fyf_sin[idx])
+    xi = np.zeros((S.vx.size, len(X)))
+    xi[:, X.VX], xi[:, X.VY], xi[:, X.R] = S.vx, S.vy, S.r
+    return _r2(y, y - params.pedal.ax(xi, S.pedal))

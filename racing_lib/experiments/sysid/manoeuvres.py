@@ -1,0 +1,529 @@
+"""The manoeuvres that identification drives, on any plant, and the logs they record."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from racing_lib.config import fast_mode
+from racing_lib.errors import ModelError
+from racing_lib.interfaces import Plant
+from racing_lib.vehicle import VehicleParams
+
+__all__ = [
+    "MANOEUVRES",
+    "CarUnderTest",
+    "DriveLog",
+    "braking_logs",
+    "coast_down_log",
+    "circle_logs",
+    "collect_logs",
+    "lap_logs",
+    "simulated_car",
+    "step_logs",
+]
+
+#: The manoeuvres :func:`collect_logs` drives, and what each one identifies.
+MANOEUVRES: dict[str, str] = {
+    "laps": "nominal-controller laps of the built-in tracks at a few speed scalings (pedal map)",
+    "coast-down": "pedal 0 from high speed on a long, nearly straight road (C_xw, c_rr)",
+    "circles": "steady-state constant-radius circles at rising speed (Pacejka B, C, D)",
+    "steps": "steps of steering and pedal around a large circle (I_zz, steering lag, pedal map)",
+    "braking": "full brake from several speeds on a long, nearly straight road (braking limit)",
+}
+
+
+# --------------------------------------------------------------------------------------------------
+# Logs
+# --------------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class DriveLog:
+    """One recorded run: observations at the control rate and the commands sent.
+
+    Node arrays have ``N + 1`` entries (observations ``k = 0..N``); command arrays have ``N``
+    (command ``k`` was sent after observation ``k`` and held until observation ``k + 1``).
+
+    Attributes
+    ----------
+    name : str
+        Human-readable label, e.g. ``"circle R=60 m"``.
+    kind : str
+        Which manoeuvre it is, a key of :data:`MANOEUVRES`.
+    t : ndarray (N+1,)
+        Time, s.
+    x, y : ndarray (N+1,)
+        Position, m.
+    psi : ndarray (N+1,)
+        Yaw angle, rad.
+    vx, vy : ndarray (N+1,)
+        Body-frame longitudinal and lateral velocity, m/s.
+    r : ndarray (N+1,)
+        Yaw rate, rad/s.
+    theta : ndarray (N+1,)
+        Road pitch at the car's position from the track map, rad (positive uphill).
+    steer : ndarray (N,)
+        Steering command, rad.
+    pedal : ndarray (N,)
+        Pedal command in [-1, 1].
+    """
+
+    name: str
+    kind: str
+    t: np.ndarray
+    x: np.ndarray
+    y: np.ndarray
+    psi: np.ndarray
+    vx: np.ndarray
+    vy: np.ndarray
+    r: np.ndarray
+    theta: np.ndarray
+    steer: np.ndarray
+    pedal: np.ndarray
+
+    def __post_init__(self) -> None:
+        nodes = ("t", "x", "y", "psi", "vx", "vy", "r", "theta")
+        n = np.asarray(self.t).size
+        for key in (*nodes, "steer", "pedal"):
+            arr = np.asarray(getattr(self, key), dtype=float).ravel()
+            want = n if key in nodes else n - 1
+            if arr.size != want:
+                raise ModelError(
+                    f"DriveLog {self.name!r}: {key} has {arr.size} samples, expected {want} "
+                    "(N + 1 observations, N commands)."
+                )
+            if not np.all(np.isfinite(arr)):
+                raise ModelError(
+                    f"DriveLog {self.name!r}: {key} contains NaN or infinite values; drop the "
+                    "broken part of the log."
+                )
+            object.__setattr__(self, key, arr)
+
+    @property
+    def duration(self) -> float:
+        """Length of the log, s."""
+        return float(self.t[-1] - self.t[0]) if self.t.size else 0.0
+
+
+def _record(
+    plant: Any,
+    obs: Any,
+    policy: Callable[[Any, int], tuple[float, float]],
+    n_steps: int,
+    name: str,
+    kind: str,
+    grade: Callable[[float, float], float] | None = None,
+    stop: Callable[[Any], bool] | None = None,
+) -> DriveLog:
+    """Drive ``plant`` from observation ``obs`` with ``policy(obs, k) -> (steer, pedal)``."""
+    rows = [obs]
+    cmds: list[tuple[float, float]] = []
+    for k in range(n_steps):
+        steer, pedal = policy(obs, k)
+        steer, pedal = float(steer), float(min(max(pedal, -1.0), 1.0))
+        obs = plant.step(steer, pedal)
+        cmds.append((steer, pedal))
+        rows.append(obs)
+        if stop is not None and stop(obs):
+            break
+    arr = {key: np.array([getattr(o, key) for o in rows]) for key in ("t", "x", "y", "psi")}
+    for key in ("vx", "vy", "r"):
+        arr[key] = np.array([getattr(o, key) for o in rows])
+    theta = np.array([grade(o.x, o.y) for o in rows]) if grade is not None else np.zeros(len(rows))
+    c = np.array(cmds, dtype=float).reshape(-1, 2)
+    return DriveLog(name, kind, theta=theta, steer=c[:, 0], pedal=c[:, 1], **arr)
+
+
+# --------------------------------------------------------------------------------------------------
+# The car under test, on any plant
+# --------------------------------------------------------------------------------------------------
+
+
+def _proving_ground(radius: float, width: float, name: str) -> Any:
+    """A flat, open circular test area of the given centre-line radius and total width (m)."""
+    from racing_lib.geometry import (
+        Path,
+        Track,
+    )
+
+    n = max(int(2.0 * math.pi * radius / 5.0), 64)
+    a = np.linspace(0.0, 2.0 * math.pi, n, endpoint=False)
+    return Track(
+        Path(radius * np.cos(a), radius * np.sin(a)),
+        width / 2.0,
+        width / 2.0,
+        boundary="open",
+        name=name,
+    )
+
+
+@dataclass(frozen=True)
+class CarUnderTest:
+    """A car to identify: how to put it on a test track, and what its data sheet says.
+
+    Identification needs nothing else of a car, so any :class:`~racing_lib.interfaces.Plant` can
+    be identified: the simulated car (:func:`simulated_car`), another simulator, or a wrapper
+    around a real car.
+
+    Attributes
+    ----------
+    make_plant : callable ``(track, start_speed) -> Plant``
+        The car at the start of ``track`` (arc length 0, on the centre line, heading along it) at
+        ``start_speed`` m/s. Each manoeuvre calls ``reset(seed)`` on it and drives it at its own
+        control period ``dt`` (s).
+    known : VehicleParams or ModelParams
+        What is known before any test: the friction coefficient ``mu`` (-), gravity ``g``
+        (m/s^2), the axle distances ``l_f``, ``l_r`` (m) and what the quasi-steady speed profile
+        needs (:func:`racing_lib.planning.speed.speed_profile`). They size the manoeuvres (target
+        lateral accelerations, steering amplitudes, lap speeds); the fits never read them.
+    """
+
+    make_plant: Callable[[Any, float], Plant]
+    known: Any
+
+
+class _SimulatedCarAt:
+    """``make_plant`` of the simulated car: a picklable callable, not a closure."""
+
+    def __init__(self, params: VehicleParams) -> None:
+        self.params = params
+
+    def __call__(self, track: Any, start_speed: float) -> Plant:
+        from racing_lib.sim import SimulatedCar
+
+        return SimulatedCar(track, self.params, dt=0.1, start_s=0.0, start_speed=start_speed)
+
+
+def simulated_car(params: VehicleParams | None = None) -> CarUnderTest:
+    """The simulated car as a :class:`CarUnderTest`; its true parameters are its data sheet.
+
+    Parameters
+    ----------
+    params : VehicleParams, optional
+        The car's true parameters (default: the built-in car).
+    """
+    vp = VehicleParams() if params is None else params
+    return CarUnderTest(make_plant=_SimulatedCarAt(vp), known=vp)
+
+
+def _as_car(car: CarUnderTest | VehicleParams | None) -> CarUnderTest:
+    """The car the manoeuvres drive: a CarUnderTest, or the simulated car with these parameters."""
+    if isinstance(car, CarUnderTest):
+        return car
+    if car is None or isinstance(car, VehicleParams):
+        return simulated_car(car)
+    raise ModelError(
+        f"the car to identify must be a CarUnderTest or the simulated car's VehicleParams, got "
+        f"{type(car).__name__}; wrap another plant with CarUnderTest(make_plant, known)."
+    )
+
+
+def _start(car: CarUnderTest, track: Any, start_speed: float, seed: int | None) -> tuple[Any, Any]:
+    """The car on ``track`` and its first observation (after a seeded reset)."""
+    plant = car.make_plant(track, start_speed)
+    return plant, plant.reset(seed=seed)
+
+
+def _follower(track: Any) -> Any:
+    """Pure-pursuit steering along the track's centre line (speed is commanded separately)."""
+    from racing_lib.control.nominal import NominalController
+
+    return NominalController(track.centerline, speed=10.0)
+
+
+class _SpeedHold:
+    """A PI loop on the pedal, for manoeuvres that hold a speed while steering is commanded."""
+
+    def __init__(self, kp: float = 0.4, ki: float = 0.15, dt: float = 0.1) -> None:
+        self.kp, self.ki, self.dt = kp, ki, dt
+        self.integral = 0.0
+
+    def __call__(self, v_target: float, v: float) -> float:
+        err = v_target - v
+        self.integral = min(max(self.integral + err * self.dt, -4.0), 4.0)
+        return min(max(self.kp * err + self.ki * self.integral, -1.0), 1.0)
+
+
+def coast_down_log(
+    car: CarUnderTest | VehicleParams | None = None,
+    seed: int = 0,
+    v_high: float = 42.0,
+    v_low: float = 8.0,
+) -> DriveLog:
+    """Coast-down: full throttle to ``v_high`` (m/s), then pedal 0 until ``v_low`` (m/s).
+
+    Driven on a 1.5 km radius circle (lateral acceleration below 1.2 m/s^2 at 42 m/s, so the
+    steering's share of the deceleration is tiny and is still accounted for). Only the pedal-0
+    part is used for drag and rolling resistance; the run-up is pedal-map data.
+
+    The car runs without its per-trial actuation noise (``reset(seed=None)``): a foot off the
+    pedals is exactly pedal 0, while the simulated car's additive pedal noise would turn "0" into
+    random light braking and throttle whose mean (about 0.04 m/s^2, brakes being ~5 times stronger
+    per unit pedal than the engine) is as large as the rolling resistance itself. ``seed`` is
+    unused and kept for a uniform signature.
+    """
+    track = _proving_ground(1500.0, 30.0, "coast-down circle")
+    plant, obs0 = _start(_as_car(car), track, start_speed=15.0, seed=None)
+    ctrl = _follower(track)
+    ctrl.reset(obs0)
+    phase = {"coast": False}
+
+    def policy(obs: Any, k: int) -> tuple[float, float]:
+        if obs.vx >= v_high:
+            phase["coast"] = True
+        return ctrl.step(obs).steer, (0.0 if phase["coast"] else 1.0)
+
+    return _record(
+        plant,
+        obs0,
+        policy,
+        6000,
+        f"coast-down {v_high:.0f}->{v_low:.0f} m/s",
+        "coast-down",
+        stop=lambda o: phase["coast"] and o.vx < v_low,
+    )
+
+
+def braking_logs(
+    car: CarUnderTest | VehicleParams | None = None,
+    speeds: Sequence[float] = (45.0, 35.0, 25.0),
+    v_low: float = 8.0,
+) -> list[DriveLog]:
+    """Straight-line stops: full throttle to each of ``speeds`` (m/s), then full brake to ``v_low``.
+
+    On the coast-down's 1.5 km circle, without actuation noise (a full stop is full brake). They
+    measure the deceleration the tyres give when the brakes ask for more than the grip, which the
+    brake slope of the pedal map, fitted on partial braking, cannot tell.
+    """
+    track = _proving_ground(1500.0, 30.0, "braking circle")
+    logs = []
+    for v_high in speeds:
+        plant, obs0 = _start(_as_car(car), track, start_speed=15.0, seed=None)
+        ctrl = _follower(track)
+        ctrl.reset(obs0)
+        phase = {"brake": False}
+
+        def policy(obs: Any, k: int, v_high=v_high, ctrl=ctrl, phase=phase) -> tuple[float, float]:
+            if obs.vx >= v_high:
+                phase["brake"] = True
+            return ctrl.step(obs).steer, (-1.0 if phase["brake"] else 1.0)
+
+        logs.append(
+            _record(
+                plant,
+                obs0,
+                policy,
+                3000,
+                f"full stop {v_high:.0f}->{v_low:.0f} m/s",
+                "braking",
+                stop=lambda o, phase=phase: phase["brake"] and o.vx < v_low,
+            )
+        )
+    return logs
+
+
+def circle_logs(
+    car: CarUnderTest | VehicleParams | None = None,
+    seed: int = 0,
+    radii: Sequence[float] = (40.0, 80.0, 150.0),
+    levels: int = 8,
+    hold: float = 5.0,
+) -> list[DriveLog]:
+    """Steady-state cornering: constant-radius circles (ISO 4138) at rising speed.
+
+    For each radius R (m) the car follows the circle with pure pursuit at ``levels`` speeds from
+    a lateral acceleration of about 0.2 g up to about 0.95 of the friction limit ``mu g``, holding
+    each for ``hold`` s, so the steering settles to a constant at every level (a steady state with
+    ``r_dot ~ 0``).
+    """
+    spec = _as_car(car)
+    vp = spec.known
+    mu, g = float(vp.mu), float(vp.g)
+    logs = []
+    for i, radius in enumerate(radii):
+        track = _proving_ground(radius, 40.0, f"circle R={radius:.0f} m")
+        speeds = np.sqrt(np.linspace(0.2, 0.95, levels) * mu * g * radius)
+        plant, obs0 = _start(spec, track, start_speed=float(speeds[0]), seed=seed + 101 * i)
+        ctrl = _follower(track)
+        ctrl.reset(obs0)
+        hold_steps = int(round(hold / plant.dt))
+        pi = _SpeedHold(dt=plant.dt)
+
+        def policy(obs: Any, k: int, speeds=speeds, ctrl=ctrl, pi=pi, h=hold_steps):
+            v_target = float(speeds[min(k // h, len(speeds) - 1)])
+            return ctrl.step(obs).steer, pi(v_target, obs.vx)
+
+        logs.append(
+            _record(plant, obs0, policy, hold_steps * levels, f"circle R={radius:.0f} m", "circles")
+        )
+    return logs
+
+
+def step_logs(
+    car: CarUnderTest | VehicleParams | None = None,
+    seed: int = 0,
+    speeds: Sequence[float] = (15.0, 25.0, 35.0),
+    duration: float = 40.0,
+) -> list[DriveLog]:
+    """Steering steps and pedal steps around a 300 m radius circle, 60 m wide.
+
+    At each base speed (m/s) the log alternates 10 s phases. *Steering phases*: a PI loop holds
+    the speed while random steering offsets (held 0.5-1.5 s, up to the kinematic steer of
+    0.35 mu g at that speed and at most 0.04 rad, so that the actuator stays below its rate
+    limit) are added to pure pursuit: yaw transients with little longitudinal force, for ``I_zz``
+    and the steering lag. *Pedal phases*: pure pursuit steers while random pedal
+    levels (held 1-3 s; throttle in [0, 1], brake in [-0.5, 0], the sign keeping the speed within
+    +-30 % of the base) excite the powertrain and brakes, for the pedal map. Keeping the two apart
+    matters: the simulated tyres share their friction between longitudinal and lateral force (which
+    the planning model does not), so yaw transients under hard throttle or braking would bias the
+    tyre and inertia fits. Braking stays below half pedal because harder braking overloads the
+    simulated car's rear brakes (a 75 % front share against the load transfer of a ~1 g stop) and
+    spins it. ``seed`` fixes the random sequences.
+    """
+    spec = _as_car(car)
+    vp = spec.known
+    L = float(vp.l_f + vp.l_r)
+    mu, g = float(vp.mu), float(vp.g)
+    phase = 100  # control periods per phase (10 s)
+    logs = []
+    for i, v0 in enumerate(speeds):
+        rng = np.random.default_rng(seed + 1000 + i)
+        track = _proving_ground(300.0, 60.0, f"steps {v0:.0f} m/s")
+        plant, obs0 = _start(spec, track, start_speed=float(v0), seed=seed + 2000 + i)
+        ctrl = _follower(track)
+        ctrl.reset(obs0)
+        n = int(round(duration / plant.dt))
+        # A swing of 2 amp stays inside the actuator's linear band (steer_rate_max * steer_tau).
+        amp = min(0.35 * mu * g * L / v0**2, 0.04)
+        steer_off = np.zeros(n)
+        pedal_lvl = np.zeros(n)
+        k = 0
+        while k < n:
+            hold = int(rng.integers(5, 16))
+            steer_off[k : k + hold] = rng.uniform(-amp, amp) if rng.random() < 0.7 else 0.0
+            k += hold
+        k = 0
+        while k < n:
+            hold = int(rng.integers(10, 31))
+            pedal_lvl[k : k + hold] = rng.uniform(0.0, 1.0)
+            k += hold
+        pi = _SpeedHold(dt=plant.dt)
+        sign = [1.0]
+
+        def policy(
+            obs: Any, k: int, ctrl=ctrl, so=steer_off, pl=pedal_lvl, v0=v0, pi=pi, sign=sign
+        ):
+            steer = ctrl.step(obs).steer
+            if abs(obs.vy) > 0.08 * max(obs.vx, 1.0):
+                return steer, 0.0  # a slide: recover with pure pursuit alone, no pedal
+            if (k // phase) % 2 == 0:  # steering phase
+                return steer + so[k], pi(v0, obs.vx)
+            # Pedal phase: a random walk in speed, reversed at the edges of the band.
+            if obs.vx < 0.7 * v0:
+                sign[0] = 1.0
+            elif obs.vx > 1.3 * v0:
+                sign[0] = -1.0
+            elif k % 30 == 0:
+                sign[0] = -sign[0]
+            return steer, sign[0] * pl[k] * (1.0 if sign[0] > 0.0 else 0.5)
+
+        logs.append(_record(plant, obs0, policy, n, f"steps at {v0:.0f} m/s", "steps"))
+    return logs
+
+
+def lap_logs(
+    car: CarUnderTest | VehicleParams | None = None,
+    seed: int = 0,
+    tracks: Sequence[str] = ("expressway", "shortcut"),
+    scalings: Sequence[float] = (0.6, 0.8),
+    max_time: float = 200.0,
+) -> list[DriveLog]:
+    """Nominal-controller laps of the built-in tracks at fractions of the track's speed profile.
+
+    As in the paper, a simple nominal controller (pure pursuit + speed PI) drives the car along
+    the centre line; ``scalings`` are fractions of the quasi-steady-state speed profile of
+    :func:`racing_lib.planning.speed.speed_profile`, m/s.
+    """
+    from racing_lib.control.nominal import NominalController, NominalSettings
+    from racing_lib.geometry import FrenetTracker
+    from racing_lib.planning.speed import speed_profile
+    from racing_lib.tracks import load_track
+
+    spec = _as_car(car)
+    vp = spec.known
+    logs = []
+    for i, name in enumerate(tracks):
+        track = load_track(name)
+        s = track.centerline.sample(ds=2.0)
+        prof = speed_profile(s, track.centerline.curvature(s), params=vp, length=track.length)
+        for j, scale in enumerate(scalings):
+            plant, obs0 = _start(
+                spec, track, start_speed=float(scale * prof(0.0)), seed=seed + 10 * i + j
+            )
+            ctrl = NominalController(
+                track.centerline,
+                lambda si, prof=prof: float(prof(si)),
+                NominalSettings(speed_scale=scale),
+            )
+            ctrl.reset(obs0)
+            tracker = FrenetTracker(track.centerline)
+
+            def grade(x: float, y: float, tracker=tracker, track=track) -> float:
+                return float(track.grade(tracker.project(x, y)[0]))
+
+            def policy(obs: Any, k: int, ctrl=ctrl) -> tuple[float, float]:
+                cmd = ctrl.step(obs)
+                return cmd.steer, cmd.pedal
+
+            n = int(round(min(max_time, 1.05 * prof.lap_time / scale) / plant.dt))
+            logs.append(
+                _record(plant, obs0, policy, n, f"lap {name} x{scale:.2f}", "laps", grade=grade)
+            )
+    return logs
+
+
+def collect_logs(
+    seed: int = 0,
+    params: VehicleParams | None = None,
+    fast: bool | None = None,
+    car: CarUnderTest | None = None,
+) -> list[DriveLog]:
+    """Drive every manoeuvre of :data:`MANOEUVRES` with a car and return the logs.
+
+    Parameters
+    ----------
+    seed : int
+        Seeds the car's per-trial randomness and the random step sequences; a different seed gives
+        fresh data.
+    params : VehicleParams, optional
+        The simulated car to drive (default: the built-in car); ignored when ``car`` is given.
+    fast : bool, optional
+        Collect less data (shorter laps, fewer levels); default :func:`racing_lib.config.fast_mode`.
+    car : CarUnderTest, optional
+        Any other plant to identify, with what is known of it beforehand.
+
+    Returns
+    -------
+    list of DriveLog
+    """
+    fast = fast_mode() if fast is None else fast
+    test_car = car if car is not None else simulated_car(params)
+    logs: list[DriveLog] = []
+    if fast:
+        logs.append(coast_down_log(test_car, seed, v_high=38.0, v_low=12.0))
+        logs += circle_logs(test_car, seed, radii=(50.0, 120.0), levels=6, hold=4.0)
+        logs += step_logs(test_car, seed, speeds=(18.0, 30.0), duration=30.0)
+        logs += lap_logs(test_car, seed, tracks=("shortcut",), scalings=(0.8,), max_time=60.0)
+        logs += braking_logs(test_car, speeds=(45.0, 35.0))
+    else:
+        logs.append(coast_down_log(test_car, seed))
+        logs += circle_logs(test_car, seed)
+        logs += step_logs(test_car, seed)
+        logs += lap_logs(test_car, seed)
+        logs += braking_logs(test_car)
+    return logs
