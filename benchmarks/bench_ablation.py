@@ -21,7 +21,9 @@ import logging
 import tempfile
 import time
 
-from racing_lib.ablation import default_trials, format_table, run_ablation
+from racing_lib.experiments.ablation.rows import default_trials
+from racing_lib.experiments.ablation.runner import run_ablation
+from racing_lib.experiments.ablation.table import format_table
 
 
 def main() -> None:

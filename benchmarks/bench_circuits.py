@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from racing_lib.errors import RacingLibError
-from racing_lib.pipeline import race
+from racing_lib.experiments.pipeline import race
 from racing_lib.planning import plan
 from racing_lib.planning.trajectory import Trajectory
 from racing_lib.tracks import load_track

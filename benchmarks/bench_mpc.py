@@ -29,12 +29,15 @@ from racing_lib.control.mpc import CoupledMPC, DecoupledMPC, MPCSettings
 from racing_lib.control.mpc.qp_cvxpy import CvxpyTrackingQP
 from racing_lib.control.mpc.qp_osqp import TrackingQP
 from racing_lib.control.mpc.qp_problem import QPSettings
-from racing_lib.experiment import run_lap
+from racing_lib.experiments.configs import (
+    configuration_name,
+    tuned_weights,
+)
+from racing_lib.experiments.lap import run_lap
 from racing_lib.model.identified import identified_params
 from racing_lib.planning.trajectory import Trajectory
 from racing_lib.sim import SimulatedCar
 from racing_lib.tracks import load_track
-from racing_lib.tuning import configuration_name, tuned_weights
 
 PARTS = ("project", "reference", "linearize", "build", "qp", "pedal", "total")
 
@@ -226,7 +229,7 @@ def main() -> None:
         """The weights race() would drive this set-up with: its shipped CMA-ES set, else defaults.
 
         Tuned weights belong to the plan they were tuned on: on the centerline plan (no tuned
-        configuration) the defaults are used, as racing_lib.pipeline.race does.
+        configuration) the defaults are used, as racing_lib.experiments.pipeline.race does.
         """
         smooth = fixed.get("smooth_transition", True)
         config = configuration_name(controller, plan.method, None, smooth)

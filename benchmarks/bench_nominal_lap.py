@@ -12,7 +12,10 @@ import statistics
 import sys
 import time
 
-from racing_lib.experiment import LapSpec, drive_lap
+from racing_lib.experiments.lap import (
+    LapSpec,
+    drive_lap,
+)
 from racing_lib.planning.trajectory import Trajectory
 from racing_lib.tracks import (
     builtin_track_names,

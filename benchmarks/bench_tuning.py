@@ -18,11 +18,18 @@ import sys
 import time
 from concurrent.futures import Executor, ProcessPoolExecutor
 
-from racing_lib.experiment import LapSpec
+from racing_lib.experiments.lap import LapSpec
+from racing_lib.experiments.tuning import (
+    evaluate_weights,
+    mpc_weight_space,
+)
 from racing_lib.model.identified import identified_params
+from racing_lib.optim.cmaes import (
+    CmaTuner,
+    TuningSettings,
+)
 from racing_lib.planning.trajectory import Trajectory
 from racing_lib.tracks import Arc, Straight, track_from_segments
-from racing_lib.tuning import CmaTuner, TuningSettings, evaluate_weights, mpc_weight_space
 
 
 def stadium_spec() -> LapSpec:

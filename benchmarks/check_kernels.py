@@ -38,7 +38,7 @@ LAP_TIME_TOLERANCE = 0.003  # relative
 
 def _laps(tracks_dir: str | None, circuits: list[str], seeds: list[int]) -> dict[str, list[dict]]:
     """Plan and drive every case in this process; per case, one dict per seed."""
-    from racing_lib.pipeline import race
+    from racing_lib.experiments.pipeline import race
 
     cases: list[tuple[str, str, str]] = [
         ("expressway main", "expressway", "time-optimal"),

@@ -493,7 +493,7 @@ CH06 = Chapter(
     intro="""Chapter 06 tunes the MPC's weights with CMA-ES, which only needs a score per closed-loop
 lap. Here you write that score, the paper's tuning objective, and the map from CMA-ES's search
 space (logarithms of the weights) to the weights themselves. The checks compare with
-`racing_lib.tuning` on laps made up for the exercise (`racing_lib.exercises.ch06.synthetic_lap`), so
+`racing_lib.experiments.tuning` on laps made up for the exercise (`racing_lib.exercises.ch06.synthetic_lap`), so
 no simulation is needed.""",
     imports="""import numpy as np
 
@@ -532,7 +532,7 @@ length where the car crosses the line, so undo that jump. Let us look at one lap
 MPC weights matter by their ratios, over orders of magnitude, so CMA-ES searches their base-10
 logarithms: a step of 0.5 means "about three times larger" for every weight alike. A candidate
 $x$ from CMA-ES becomes weights by $w_i = 10^{x_i}$, after clipping $x_i$ into the box
-$[\\log_{10} w_{i,\\min}, \\log_{10} w_{i,\\max}]$. The `space` (a `racing_lib.tuning.SearchSpace`)
+$[\\log_{10} w_{i,\\min}, \\log_{10} w_{i,\\max}]$. The `space` (a `racing_lib.optim.cmaes.SearchSpace`)
 has `space.names`, `space.lower` and `space.upper` (in the weights' own units). Return a dict
 `{name: weight}`.""",
             header='''def to_params(space, x):

@@ -155,7 +155,7 @@ def cmd_plan(args: argparse.Namespace) -> int:
 
 def cmd_lap(args: argparse.Namespace) -> int:
     """Drive laps in closed loop and report their metrics."""
-    from racing_lib.pipeline import race
+    from racing_lib.experiments.pipeline import race
 
     out_dir = FilePath(args.out) if args.out else None
 
@@ -238,9 +238,11 @@ def _save_lap_outputs(out_dir: FilePath, track, trajectory, results, report) -> 
 
 def cmd_tune(args: argparse.Namespace) -> int:
     """Tune the coupled MPC's weights with CMA-ES on the time-optimal plan of a track."""
+    from racing_lib.experiments.configs import config_spec
+    from racing_lib.experiments.tuning import tune_weights
     from racing_lib.io import atomic_write_json, jsonable
+    from racing_lib.optim.cmaes import TuningSettings
     from racing_lib.tracks import load_track
-    from racing_lib.tuning import TuningSettings, config_spec, tune_weights
 
     track = load_track(args.track)
     _say(f"planning {track.name} time-optimally ...")
@@ -290,8 +292,11 @@ def cmd_ablation(args: argparse.Namespace) -> int:
     Shows the shipped table at once; rows recomputed with ``--recompute`` (or found recomputed in
     the ``--out`` cache folder) replace their shipped versions and are marked as such.
     """
-    from racing_lib import ablation
-    from racing_lib.ablation_check import compare_rows, format_checks
+    from racing_lib.experiments import ablation
+    from racing_lib.experiments.ablation.check import (
+        compare_rows,
+        format_checks,
+    )
     from racing_lib.provenance import describe, environment
 
     shown = [r.name for r in ablation.select_rows(_row_names(args.rows), args.track)]
@@ -366,7 +371,9 @@ def cmd_ablation(args: argparse.Namespace) -> int:
         if fresh:
             print(f"recomputed rows: {describe(environment())}")
         if checks:
-            print("\nrecomputed against shipped (tolerances: racing_lib.ablation_check):")
+            print(
+                "\nrecomputed against shipped (tolerances: racing_lib.experiments.ablation.check):"
+            )
             print(format_checks(checks))
     if moved and args.check:
         _say(f"error: {len(moved)} number(s) moved beyond tolerance (MOVED above).")
@@ -489,7 +496,7 @@ def check_arguments(args: argparse.Namespace) -> None:
         )
     out = getattr(args, "out", None)
     if args.command == "ablation" and getattr(args, "recompute", None) and not out:
-        from racing_lib.ablation import DEFAULT_OUT
+        from racing_lib.experiments.ablation.runner import DEFAULT_OUT
 
         check_output_dir(DEFAULT_OUT, "--out (default)")
     if out:
@@ -620,7 +627,8 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="exit 1 if a recomputed row differs from the shipped one beyond tolerance",
     )
-    # Its own dest: the default (10, or 2 in fast mode) is decided by racing_lib.ablation.
+    # Its own dest: the default (10, or 2 in fast mode) is decided by
+    # racing_lib.experiments.ablation.
     p.add_argument(
         "--trials",
         dest="ablation_trials",

@@ -1,4 +1,5 @@
-"""Small file helpers shared by every module that writes: atomic writes, JSON-ready values.
+"""Small file helpers shared by every module that writes: atomic writes, JSON-ready values, and
+where the package's shipped data lives (:func:`data_file`).
 
 A write goes to a temporary file in the same folder and is then renamed over the target, so an
 interrupted run leaves either the old file or the new one, never half of one.
@@ -15,6 +16,14 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+#: The package's shipped data: the identified parameters, the tuned weights, the ablation table.
+DATA_DIR = Path(__file__).resolve().parent / "data"
+
+
+def data_file(name: str) -> Path:
+    """The path of a file shipped in ``racing_lib/data`` (it need not exist yet)."""
+    return DATA_DIR / name
 
 
 def atomic_write_bytes(path: str | os.PathLike[str], data: bytes) -> None:

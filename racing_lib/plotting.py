@@ -2,8 +2,8 @@
 
 Every function takes an optional ``ax`` (or ``axes``), draws, and returns what it drew; none calls
 ``plt.show()``. Lines are given as anything with ``x`` and ``y`` arrays (a planned
-:class:`~racing_lib.planning.trajectory.Trajectory`, a :class:`~racing_lib.experiment.LapLog`) or as
-an ``(x, y)`` pair.
+:class:`~racing_lib.planning.trajectory.Trajectory`, a :class:`~racing_lib.experiments.lap.LapLog`)
+or as an ``(x, y)`` pair.
 """
 
 from __future__ import annotations

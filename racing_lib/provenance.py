@@ -1,17 +1,23 @@
-"""Where a result was made: the machine, the linear-algebra kernel and the package versions.
+"""Where a result was made: the machine, the linear-algebra kernel, the versions and the code.
 
 Shipped results (the ablation table) and benchmark reports record this, so that a reader who gets
-other numbers can see at once whether the machine or a version differs. Taught nowhere; used by
-:mod:`racing_lib.ablation` and the scripts in ``benchmarks/``.
+other numbers can see at once whether the machine or a version differs. :func:`code_digest` hashes
+the source a computation runs, found by reading imports rather than from a list of files, so that
+a cache keyed by it follows every module moved, added or edited. Taught nowhere; used by
+:mod:`racing_lib.experiments.ablation` and the scripts in ``benchmarks/``.
 """
 
 from __future__ import annotations
 
+import ast
+import hashlib
 import os
 import platform
 import sys
 import time
+from collections.abc import Iterable
 from importlib import metadata
+from pathlib import Path
 from typing import Any
 
 #: The distributions whose versions can move a number of this package.
@@ -113,3 +119,100 @@ def _cpu_name() -> str:
     except OSError:
         pass
     return platform.processor() or platform.machine() or "unknown"
+
+
+# --------------------------------------------------------------------------------------------------
+# The code a computation runs
+
+#: The package's own folder (``racing_lib/``).
+PACKAGE_ROOT = Path(__file__).resolve().parent
+
+
+def _module_file(name: str, root: Path) -> Path | None:
+    """The source file of package module ``name`` (``racing_lib.a.b``), or None if there is none."""
+    parts = name.split(".")[1:]
+    base = root.joinpath(*parts)
+    for candidate in (base.with_suffix(".py"), base / "__init__.py"):
+        if candidate.is_file():
+            return candidate
+    return None
+
+
+def _imports_of(source: str, package: str) -> set[str]:
+    """Every ``package`` module named by an import in ``source``, at any depth of the code.
+
+    ``from package.a import b`` names ``package.a`` and, in case ``b`` is a submodule,
+    ``package.a.b`` (names that are not modules are dropped by the caller).
+    """
+    found: set[str] = set()
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.Import):
+            found.update(a.name for a in node.names if a.name.split(".")[0] == package)
+        elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+            if node.module.split(".")[0] == package:
+                found.add(node.module)
+                found.update(f"{node.module}.{a.name}" for a in node.names)
+    return found
+
+
+def imported_modules(modules: Iterable[str], root: Path = PACKAGE_ROOT) -> list[str]:
+    """``modules`` and every module of the package they import, directly or not, sorted.
+
+    Read from the source (nothing is imported), function-level imports included, and with the
+    packages whose ``__init__`` runs on the way (importing ``racing_lib.a.b`` runs ``racing_lib``
+    and ``racing_lib.a`` first).
+
+    Parameters
+    ----------
+    modules : iterable of str
+        Dotted module names of the package, e.g. ``["racing_lib.planning"]``.
+    root : Path
+        The package's folder (default: this installation's ``racing_lib/``).
+    """
+    todo = list(modules)
+    seen: set[str] = set()
+    while todo:
+        name = todo.pop()
+        if name in seen:
+            continue
+        path = _module_file(name, root)
+        if path is None:
+            continue  # an imported name that is not a module (a function, a class)
+        seen.add(name)
+        parts = name.split(".")
+        todo.extend(".".join(parts[:i]) for i in range(1, len(parts)))
+        todo.extend(_imports_of(path.read_text(encoding="utf-8"), parts[0]))
+    return sorted(seen)
+
+
+def _data_files(path: Path, root: Path) -> list[Path]:
+    """Files of ``root/data`` whose names appear as string constants in the module at ``path``."""
+    data = root / "data"
+    shipped = {f.name for f in data.iterdir() if f.is_file()} if data.is_dir() else set()
+    names = {
+        node.value
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8")))
+        if isinstance(node, ast.Constant) and isinstance(node.value, str)
+    }
+    return sorted(data / n for n in names & shipped)
+
+
+def code_digest(modules: Iterable[str], root: Path = PACKAGE_ROOT) -> str:
+    """Hash (16 hex characters) of the source that ``modules`` run, and of the data it reads.
+
+    The source of ``modules`` and of every package module they import (:func:`imported_modules`),
+    plus each file of ``racing_lib/data`` that one of those modules names in a string constant
+    (such as ``"identified_params.json"``). Any edit, move or new import in that code changes the
+    hash; code the modules never import does not.
+    """
+    digest = hashlib.sha256()
+    files: set[Path] = set()
+    for name in imported_modules(modules, root):
+        path = _module_file(name, root)
+        assert path is not None  # imported_modules keeps modules with a file only
+        files.add(path)
+        files.update(_data_files(path, root))
+    for path in sorted(files):
+        digest.update(path.relative_to(root).as_posix().encode())
+        digest.update(path.read_bytes())
+    return digest.hexdigest()[:16]

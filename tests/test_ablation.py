@@ -12,21 +12,28 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 import pytest
 
-from racing_lib import ablation
-from racing_lib.ablation import (
+from racing_lib.cli import main
+from racing_lib.errors import ControlError, RacingLibError, TrackError
+from racing_lib.experiments.ablation import runner as ablation_runner
+from racing_lib.experiments.ablation import table as ablation_table
+from racing_lib.experiments.ablation.rows import (
     ablation_rows,
+    select_rows,
+)
+from racing_lib.experiments.ablation.runner import run_ablation
+from racing_lib.experiments.ablation.table import (
     format_table,
     generate_ablation_table,
     load_table,
-    run_ablation,
-    select_rows,
     shipped_table,
     stale_rows,
 )
-from racing_lib.cli import main
-from racing_lib.errors import ControlError, RacingLibError, TrackError
+from racing_lib.experiments.configs import (
+    TUNING_CONFIGS,
+    tuned_weights,
+)
+from racing_lib.experiments.tuning import MPC_WEIGHT_NAMES
 from racing_lib.tracks import Arc, Straight, track_from_segments
-from racing_lib.tuning import MPC_WEIGHT_NAMES, TUNING_CONFIGS, tuned_weights
 
 #: Plan node spacing of the tests, m: coarse, so that every plan takes well under a second.
 SPACING = 10.0
@@ -79,12 +86,12 @@ def _mtimes(folder) -> dict[str, int]:
 
 
 class Calls:
-    """Wraps a function of racing_lib.ablation and counts its calls (or refuses them)."""
+    """Wraps a function of the ablation runner and counts its calls (or refuses them)."""
 
     def __init__(self, monkeypatch, name: str, refuse: bool = False, interrupt_at: int = 0):
-        self.fn = getattr(ablation, name)
+        self.fn = getattr(ablation_runner, name)
         self.name, self.refuse, self.interrupt_at, self.n = name, refuse, interrupt_at, 0
-        monkeypatch.setattr(ablation, name, self)
+        monkeypatch.setattr(ablation_runner, name, self)
 
     def __call__(self, *args, **kwargs):
         self.n += 1
@@ -207,7 +214,7 @@ def test_a_stale_row_is_recomputed_and_the_others_reused(table, tracks, monkeypa
     plans = Calls(monkeypatch, "_make_plan")
     new_weights = {**(tuned_weights("no-smooth-transition") or {}), "w_ey": 7.0}
     monkeypatch.setattr(
-        ablation,
+        ablation_runner,
         "tuned_weights",
         lambda cfg: new_weights if cfg == "no-smooth-transition" else tuned_weights(cfg),
     )
@@ -292,12 +299,12 @@ def test_generate_writes_a_table_that_loads_back(table, tracks, tmp_path, monkey
     assert data["fast_mode"] is True and data["trials"] == 1
     assert data["provenance"]["packages"]["casadi"] != "not installed"
     assert stale_rows(data["rows"], tracks=tracks) == []
-    monkeypatch.setattr(ablation, "tuned_weights", lambda cfg: {"w_ey": 3.0})
+    monkeypatch.setattr(ablation_table, "tuned_weights", lambda cfg: {"w_ey": 3.0})
     assert stale_rows(data["rows"], tracks=tracks) == ALL_ROWS  # every row's weights changed
 
 
 def test_the_shipped_table_is_full_and_small_or_says_how_to_make_it():
-    path = ablation._shipped_path()
+    path = ablation_table._shipped_path()
     if not path.exists():
         with pytest.raises(RacingLibError, match="generate_ablation_table"):
             shipped_table()
@@ -312,7 +319,7 @@ def test_the_shipped_table_is_full_and_small_or_says_how_to_make_it():
 def test_a_hand_edited_row_of_a_table_is_refused(table, tmp_path):
     _, rows = table
     path = tmp_path / "table.json"
-    path.write_text(ablation._table_text({"format": ablation.TABLE_FORMAT}, rows))
+    path.write_text(ablation_table._table_text({"format": ablation_table.TABLE_FORMAT}, rows))
     assert len(load_table(path)["rows"]) == len(rows)
     edited = json.loads(path.read_text())
     edited["rows"][0]["lap_time_mean_s"] -= 0.5  # a better lap time, typed in
@@ -330,7 +337,10 @@ def test_a_table_without_provenance_and_checksums_is_refused(table, tmp_path):
 
 
 def test_the_comparison_passes_the_same_laps_and_fails_a_lap_that_moved(table):
-    from racing_lib.ablation_check import compare_rows, format_checks
+    from racing_lib.experiments.ablation.check import (
+        compare_rows,
+        format_checks,
+    )
 
     _, rows = table
     row = rows[0]
@@ -358,8 +368,11 @@ def test_the_comparison_passes_the_same_laps_and_fails_a_lap_that_moved(table):
 @pytest.mark.slow
 def test_the_main_row_recomputed_here_matches_the_shipped_one(tmp_path, capsys):
     """CI recomputes the paper's main row with its ten seeds and compares it with the shipped
-    row within the statistical tolerances of racing_lib.ablation_check."""
-    from racing_lib.ablation_check import compare_rows, format_checks
+    row within the statistical tolerances of racing_lib.experiments.ablation.check."""
+    from racing_lib.experiments.ablation.check import (
+        compare_rows,
+        format_checks,
+    )
 
     shipped = {r["name"]: r for r in shipped_table()}["main"]
     logging.disable(logging.WARNING)
@@ -402,7 +415,7 @@ def test_cli_recompute_marks_the_row_and_check_fails_on_numbers_that_moved(
     tracks, monkeypatch, capsys, tmp_path
 ):
     out = tmp_path / "cache"
-    monkeypatch.setattr(ablation, "load_track", lambda name: tracks[name])
+    monkeypatch.setattr(ablation_runner, "load_track", lambda name: tracks[name])
     args = ["ablation", "--rows", "decoupled", "--recompute", "main", "--trials", "1",
             "--spacing", str(SPACING), "--out", str(out)]  # fmt: skip
     assert main([*args, "--json"]) == 0  # the coarse oval's row differs: shown, not an error
@@ -417,7 +430,7 @@ def test_cli_recompute_marks_the_row_and_check_fails_on_numbers_that_moved(
 
 def test_cli_json_prints_one_object_with_the_rows(table, tracks, monkeypatch, capsys):
     out, rows = table
-    monkeypatch.setattr(ablation, "load_track", lambda name: tracks[name])
+    monkeypatch.setattr(ablation_runner, "load_track", lambda name: tracks[name])
     Calls(monkeypatch, "_trial", refuse=True)  # reused from the table's folder
     code = main(
         ["ablation", "--track", "shortcut", "--trials", "1", "--spacing", str(SPACING),

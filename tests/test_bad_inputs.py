@@ -45,16 +45,17 @@ def test_there_are_at_least_thirty_cases():
 @pytest.mark.parametrize("what", CASES)
 def test_a_bad_input_is_refused_at_once_in_one_line(what, files, tmp_path, monkeypatch, capsys):
     case = next(c for c in bad_inputs.cases(files) if c.what == what)
-    import racing_lib.ablation as ablation
-    import racing_lib.pipeline as pipeline
+    import racing_lib.experiments.ablation.runner as ablation
+    import racing_lib.experiments.configs as configs
+    import racing_lib.experiments.pipeline as pipeline
+    import racing_lib.experiments.tuning as tuning
     import racing_lib.planning as planning
-    import racing_lib.tuning as tuning
 
     monkeypatch.setattr(planning, "plan", _never("planning"))
     monkeypatch.setattr(pipeline, "plan", _never("planning"))
     monkeypatch.setattr(pipeline, "drive_lap", _never("driving a lap"))
     monkeypatch.setattr(tuning, "tune_weights", _never("tuning"))
-    monkeypatch.setattr(tuning, "config_spec", _never("planning for tuning"))
+    monkeypatch.setattr(configs, "config_spec", _never("planning for tuning"))
     monkeypatch.setattr(ablation, "run_trials", _never("an ablation row's laps"))
     monkeypatch.setattr(ablation, "_get_plan", _never("an ablation row's plan"))
     monkeypatch.chdir(tmp_path)

@@ -11,7 +11,12 @@ import numpy as np
 import pytest
 
 from racing_lib.errors import PlantError
-from racing_lib.experiment import LapMetrics, run_lap, run_trials, summarize
+from racing_lib.experiments.lap import (
+    LapMetrics,
+    run_lap,
+    run_trials,
+    summarize,
+)
 from racing_lib.interfaces import Command, Observation
 from racing_lib.tracks import circle_track
 
@@ -134,7 +139,10 @@ def test_trials_through_an_executor_match_serial(circle):
 def test_nominal_controller_laps_each_builtin_track_cleanly(name):
     """Chapter 01's lap: the centerline at a moderate speed, no wall contact, nothing off track."""
     from racing_lib.control.nominal import MODERATE_SPEED_SCALE
-    from racing_lib.experiment import LapSpec, drive_lap
+    from racing_lib.experiments.lap import (
+        LapSpec,
+        drive_lap,
+    )
     from racing_lib.planning.trajectory import Trajectory
     from racing_lib.tracks import load_track
 

@@ -356,7 +356,7 @@ TEN_SEEDS = list(range(10))
 @pytest.mark.parametrize("name", ["expressway", "shortcut"])
 @pytest.mark.parametrize("seed", LAP_SEEDS)
 def test_coupled_mpc_completes_laps_without_contact(setups, name, seed):
-    from racing_lib.experiment import run_lap
+    from racing_lib.experiments.lap import run_lap
 
     track, plan, params = setups[name]
     mpc = CoupledMPC(plan, params=params, track=track)
@@ -377,7 +377,7 @@ def test_coupled_mpc_completes_laps_without_contact(setups, name, seed):
 @pytest.mark.parametrize("name", ["expressway", "shortcut"])
 def test_tuned_coupled_mpc_laps_the_time_optimal_plan_without_contact(name):
     """The paper's main experiment on both tracks: the plan at the model's limit, tuned weights."""
-    from racing_lib.pipeline import race
+    from racing_lib.experiments.pipeline import race
 
     result = race(name, method="time-optimal", controller="coupled-mpc", trials=len(TEN_SEEDS))
     assert result.weights_source == "tuned for 'main'"
@@ -437,7 +437,7 @@ def test_forced_qp_failures_fall_back_and_are_counted(setups, monkeypatch, caplo
 
 def test_lap_goes_on_with_a_solver_that_fails_now_and_then(setups):
     """max_iter = 1 now and then: the lap still progresses and the failures are reported."""
-    from racing_lib.experiment import run_lap
+    from racing_lib.experiments.lap import run_lap
 
     track, plan, params = setups["shortcut"]
     mpc = CoupledMPC(plan, params=params, track=track)
@@ -460,7 +460,7 @@ def test_lap_goes_on_with_a_solver_that_fails_now_and_then(setups):
 
 
 def test_decoupled_mpc_drives(setups):
-    from racing_lib.experiment import run_lap
+    from racing_lib.experiments.lap import run_lap
 
     track, plan, params = setups["shortcut"]
     mpc = DecoupledMPC(plan, params=params, track=track)

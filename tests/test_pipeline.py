@@ -10,10 +10,16 @@ import pytest
 
 from racing_lib.control.nominal import MODERATE_SPEED_SCALE
 from racing_lib.errors import ControlError, PlanningError, RacingLibError, TrackError
-from racing_lib.experiment import drive_lap
-from racing_lib.pipeline import RaceResult, race
+from racing_lib.experiments.configs import (
+    configuration_name,
+    tuned_weights,
+)
+from racing_lib.experiments.lap import drive_lap
+from racing_lib.experiments.pipeline import (
+    RaceResult,
+    race,
+)
 from racing_lib.planning.trajectory import Trajectory
-from racing_lib.tuning import configuration_name, tuned_weights
 
 TRIAL_FIELDS = {
     "seed", "completed", "lap_time_s", "vx_mae_mps", "vx_max_err_mps", "ey_mae_m", "ey_max_m",
@@ -147,7 +153,7 @@ def test_a_plan_file_and_the_nominal_controller(stadium, tmp_path):
 
 
 def test_a_plan_driven_with_other_model_effects_warns(stadium):
-    from racing_lib.pipeline import ModelMismatchWarning
+    from racing_lib.experiments.pipeline import ModelMismatchWarning
 
     track, reference = stadium
     no_drag = dataclasses.replace(
@@ -184,7 +190,7 @@ def test_bad_names_are_one_clear_error(kwargs, error, hint, monkeypatch):
         raise AssertionError("race planned before checking its arguments")
 
     if "method" not in kwargs:
-        monkeypatch.setattr("racing_lib.pipeline.plan", no_planning)
+        monkeypatch.setattr("racing_lib.experiments.pipeline.plan", no_planning)
     with pytest.raises(error, match=hint):
         race(**kwargs)
 

@@ -12,26 +12,35 @@ import numpy as np
 import pytest
 
 from racing_lib.errors import ControlError
-from racing_lib.experiment import LapLog, LapMetrics, LapSpec, drive_lap
-from racing_lib.planning.trajectory import Trajectory
-from racing_lib.tracks import circle_track
-from racing_lib.tuning import (
-    HISTORY_FILE,
+from racing_lib.experiments.configs import (
+    tuned_configurations,
+    tuned_weights,
+)
+from racing_lib.experiments.lap import (
+    LapLog,
+    LapMetrics,
+    LapSpec,
+    drive_lap,
+)
+from racing_lib.experiments.tuning import (
     INCOMPLETE_PENALTY,
-    STATE_FILE,
-    SearchSpace,
-    TuningSettings,
     evaluate_nominal_gains,
     evaluate_weights,
     mpc_weight_space,
     nominal_gain_space,
-    tune,
     tune_nominal_gains,
     tune_weights,
-    tuned_configurations,
-    tuned_weights,
     tuning_objective,
 )
+from racing_lib.optim.cmaes import (
+    HISTORY_FILE,
+    STATE_FILE,
+    SearchSpace,
+    TuningSettings,
+    tune,
+)
+from racing_lib.planning.trajectory import Trajectory
+from racing_lib.tracks import circle_track
 
 # --------------------------------------------------------------------------------------------------
 # The objective on hand-made logs

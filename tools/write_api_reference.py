@@ -34,11 +34,11 @@ SECTIONS = [
         "Experiments: laps, identification, tuning, the paper's tables",
         [
             "racing_lib.experiments",
-            "racing_lib.tuning",
-            "racing_lib.experiment",
-            "racing_lib.ablation",
-            "racing_lib.ablation_check",
-            "racing_lib.pipeline",
+            "racing_lib.experiments.tuning",
+            "racing_lib.experiments.lap",
+            "racing_lib.experiments.ablation",
+            "racing_lib.experiments.ablation.check",
+            "racing_lib.experiments.pipeline",
         ],
     ),
     (

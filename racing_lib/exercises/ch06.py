@@ -1,7 +1,7 @@
 """Checks of the exercises of chapter 06 (tuning the MPC with CMA-ES).
 
 Exercise notebook: ``exercises/06_tuning.ipynb``. Every check compares the reader's function with
-:mod:`racing_lib.tuning` on the same cases.
+:mod:`racing_lib.experiments.tuning` on the same cases.
 
 * 6.1 :func:`check_tuning_objective`: the score of one completed closed-loop lap (paper Eq. CMA).
 * 6.2 :func:`check_search_space`: from a CMA-ES point in log10 space to the MPC weights.
@@ -27,7 +27,10 @@ def synthetic_lap(
     beyond, logged every 0.1 s; ``ey_scale`` (m) sets its lateral errors, ``wall_time`` and
     ``offtrack_time`` (s) its collision times.
     """
-    from racing_lib.experiment import LapLog, LapMetrics
+    from racing_lib.experiments.lap import (
+        LapLog,
+        LapMetrics,
+    )
 
     rng = np.random.default_rng(seed)
     dt = 0.1
@@ -78,10 +81,14 @@ def synthetic_lap(
 def check_tuning_objective(objective) -> CheckResult:
     """Exercise 6.1: ``objective(log, metrics, track_length, w_t, w_s) -> J`` of a completed lap.
 
-    Compared with :func:`racing_lib.tuning.tuning_objective` (1e-9) on three laps: a clean one, one
-    that touches a wall, and one that leaves an open track.
+    Compared with :func:`racing_lib.experiments.tuning.tuning_objective` (1e-9) on three laps: a
+    clean one, one that touches a wall, and one that leaves an open track.
     """
-    from racing_lib.tuning import W_S, W_T, tuning_objective
+    from racing_lib.experiments.tuning import (
+        W_S,
+        W_T,
+        tuning_objective,
+    )
 
     laps = [
         ("a clean lap", synthetic_lap(0)),
@@ -117,7 +124,10 @@ def check_tuning_objective(objective) -> CheckResult:
                 elif lap.sum() < lap.size:
                     msg += " Use only the steps of the lap itself (log.in_lap)."
                 raise Wrong(msg)
-        return "the objective agrees with racing_lib.tuning on clean laps, walls and off-track."
+        return (
+            "the objective agrees with racing_lib.experiments.tuning on clean laps, walls and "
+            "off-track."
+        )
 
     return grade("6.1 Tuning objective", body, weight=2.0)
 
@@ -125,10 +135,10 @@ def check_tuning_objective(objective) -> CheckResult:
 def check_search_space(to_params) -> CheckResult:
     """Exercise 6.2: ``to_params(space, x) -> {name: weight}`` from a CMA-ES point in log10 space.
 
-    Compared with :meth:`racing_lib.tuning.SearchSpace.to_params` (relative 1e-9) on the six MPC
-    weights, with points inside and outside the box.
+    Compared with :meth:`racing_lib.optim.cmaes.SearchSpace.to_params` (relative 1e-9) on the six
+    MPC weights, with points inside and outside the box.
     """
-    from racing_lib.tuning import mpc_weight_space
+    from racing_lib.experiments.tuning import mpc_weight_space
 
     space = mpc_weight_space()
     lo, hi = space.log_bounds()

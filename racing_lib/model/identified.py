@@ -10,11 +10,11 @@ from __future__ import annotations
 
 import functools
 import json
-from importlib import resources
 from pathlib import Path
 from typing import Any
 
 from racing_lib.errors import ModelError
+from racing_lib.io import data_file
 from racing_lib.model.params import ModelParams
 
 __all__ = [
@@ -31,12 +31,12 @@ DATA_FILE = "identified_params.json"
 
 def shipped_fit_path() -> Path:
     """Where the shipped fit lives: ``racing_lib/data/identified_params.json`` in the package."""
-    return Path(__file__).resolve().parents[1] / "data" / DATA_FILE
+    return data_file(DATA_FILE)
 
 
 def shipped_fit() -> dict[str, Any]:
     """The JSON of the shipped fit (``racing_lib/data/identified_params.json``)."""
-    ref = resources.files("racing_lib") / "data" / DATA_FILE
+    ref = data_file(DATA_FILE)
     try:
         return json.loads(ref.read_text(encoding="utf-8"))
     except FileNotFoundError:

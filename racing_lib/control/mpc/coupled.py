@@ -64,7 +64,7 @@ class CoupledMPC(MPCBase):
     >>> mpc.stats()
     {'qp_failures': 0.0, 'fallback_shifted': 0.0, 'fallback_brake': 0.0, 'qp_rescues': 0.0}
 
-    A whole lap: ``racing_lib.experiment.run_lap(car, mpc, plan, track=track, seed=0)``.
+    A whole lap: ``racing_lib.experiments.lap.run_lap(car, mpc, plan, track=track, seed=0)``.
     """
 
     def __init__(self, plan: Any, params: Any = None, options: Any = None, pedal_map: Any = None,

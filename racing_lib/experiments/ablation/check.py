@@ -108,7 +108,8 @@ def compare_rows(shipped: Mapping[str, Any], recomputed: Mapping[str, Any]) -> l
     Parameters
     ----------
     shipped, recomputed : dict
-        Two rows of the same name, as :func:`racing_lib.ablation.run_ablation` returns them.
+        Two rows of the same name, as :func:`racing_lib.experiments.ablation.run_ablation`
+        returns them.
     """
     name = str(shipped.get("name"))
     planned = float(shipped["planned_lap_time_s"])

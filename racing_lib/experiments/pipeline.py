@@ -2,17 +2,18 @@
 
 :func:`race` strings together what the chapters build one at a time: it loads a track
 (:func:`racing_lib.tracks.load_track`), plans a lap (:func:`racing_lib.planning.plan`), picks the
-MPC weights that CMA-ES tuned for that set-up (:func:`racing_lib.tuning.configuration_name`,
-:func:`racing_lib.tuning.tuned_weights`), and drives seeded flying laps of the simulated car
-(:class:`racing_lib.experiment.LapSpec`, :func:`racing_lib.experiment.drive_lap`). It adds no
-algorithm of its own. Taught in notebook 00 (the introduction); ``racing-lib lap`` does the same
-from the command line.
+MPC weights that CMA-ES tuned for that set-up
+(:func:`racing_lib.experiments.configs.configuration_name`,
+:func:`racing_lib.experiments.configs.tuned_weights`), and drives seeded flying laps of the
+simulated car (:class:`racing_lib.experiments.lap.LapSpec`,
+:func:`racing_lib.experiments.lap.drive_lap`). It adds no algorithm of its own. Taught in notebook
+00 (the introduction); ``racing-lib lap`` does the same from the command line.
 
 Examples
 --------
 The paper's main experiment on the default track (about 20 s: most of it is the planning):
 
->>> from racing_lib.pipeline import race
+>>> from racing_lib.experiments.pipeline import race
 >>> result = race("expressway", method="time-optimal", controller="coupled-mpc")  # doctest: +SKIP
 >>> print(result.table())  # doctest: +SKIP
 
@@ -36,7 +37,13 @@ from typing import Any
 import numpy as np
 
 from racing_lib.errors import ArgumentError, ControlError, checked_arguments
-from racing_lib.experiment import LapMetrics, LapResult, LapSpec, drive_lap, summarize
+from racing_lib.experiments.lap import (
+    LapMetrics,
+    LapResult,
+    LapSpec,
+    drive_lap,
+    summarize,
+)
 from racing_lib.geometry import Track
 from racing_lib.planning import PlanResult, Trajectory, plan
 from racing_lib.tracks import load_track
@@ -57,14 +64,15 @@ class RaceResult:
         The planner's result; None when a ready-made reference was given to :func:`race`.
     spec : LapSpec
         The lap as driven (track, reference, controller, weights, options); pass it to
-        :func:`racing_lib.experiment.drive_lap` to drive it again.
+        :func:`racing_lib.experiments.lap.drive_lap` to drive it again.
     laps : list of LapResult
         One lap per seed, in the order of :attr:`seeds`.
     weights_source : str
         Where the controller's weights came from, in words (for example
         ``"tuned for 'main'"`` or ``"defaults"``).
     configuration : str or None
-        The entry of :data:`racing_lib.tuning.TUNING_CONFIGS` this set-up corresponds to.
+        The entry of :data:`racing_lib.experiments.configs.TUNING_CONFIGS` this set-up corresponds
+        to.
     """
 
     track: Track
@@ -122,7 +130,7 @@ class RaceResult:
         -------
         dict
             ``track``, ``controller``, ``planned_lap_time_s`` (of the reference tracked, s),
-            ``trials`` (one dict of :class:`~racing_lib.experiment.LapMetrics` fields per lap,
+            ``trials`` (one dict of :class:`~racing_lib.experiments.lap.LapMetrics` fields per lap,
             without the controller's counters) and ``summary`` (lap-time mean, std and best over
             the completed laps, s, and their number); values of laps not completed are None.
         """
@@ -208,7 +216,10 @@ def _resolve_weights(
     smooth_transition: bool,
 ) -> tuple[dict[str, float] | None, str, str | None]:
     """The MPC weights to drive with, a description of where they came from, and the config."""
-    from racing_lib.tuning import configuration_name, tuned_weights
+    from racing_lib.experiments.configs import (
+        configuration_name,
+        tuned_weights,
+    )
 
     config = configuration_name(controller, method, options, smooth_transition)
     if controller == "nominal":
@@ -326,9 +337,10 @@ def race(
         ``trials`` uses ``seed + i``.
     weights : 'tuned', 'default', None or dict
         MPC weights. ``'tuned'``: the CMA-ES weights shipped for this set-up
-        (:func:`racing_lib.tuning.tuned_weights` of :func:`~racing_lib.tuning.configuration_name`),
-        the MPC's defaults when none are shipped; ``'default'`` or None: the defaults; a dict
-        (fields of ``MPCSettings`` such as ``w_ey``): those weights.
+        (:func:`racing_lib.experiments.configs.tuned_weights` of
+        :func:`~racing_lib.experiments.configs.configuration_name`), the MPC's defaults when none
+        are shipped; ``'default'`` or None: the defaults; a dict (fields of ``MPCSettings`` such as
+        ``w_ey``): those weights.
     trials : int
         Number of seeded laps.
     options : ModelOptions, optional
@@ -348,8 +360,8 @@ def race(
         Called with one line of text at each step (planning, weights, each lap), for example
         ``print``; silent when omitted.
     on_lap : callable, optional
-        Called with each :class:`~racing_lib.experiment.LapResult` as soon as that lap ends, for
-        example to save its log, so that an interrupted run of many trials keeps the laps done.
+        Called with each :class:`~racing_lib.experiments.lap.LapResult` as soon as that lap ends,
+        for example to save its log, so that an interrupted run of many trials keeps the laps done.
 
     Returns
     -------

@@ -1,0 +1,149 @@
+"""Cache keys: a hash of everything that determines a plan or a row, the code it runs included."""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+
+from racing_lib.config import fast_mode
+from racing_lib.experiments.ablation.profiles import PROFILE_SPACING
+from racing_lib.experiments.ablation.rows import AblationRow
+from racing_lib.experiments.configs import (
+    TUNING_CONFIGS,
+)
+from racing_lib.experiments.lap import (
+    LapSpec,
+)
+from racing_lib.geometry import Track
+from racing_lib.provenance import code_digest
+
+__all__ = ["FORMAT"]
+
+#: Version of the row files; bumping it invalidates every cached row.
+FORMAT = 1
+
+#: The modules whose code makes a plan, a best lap and a row's laps. Their source, and that of
+#: everything they import (read from the imports by :func:`racing_lib.provenance.code_digest`, so
+#: no list of files here can fall behind a move), enters the cache keys: a change of the planner
+#: or the controller invalidates the rows that depend on it, and only those.
+_PLAN_CODE = ("racing_lib.planning",)
+_BEST_LAP_CODE = (*_PLAN_CODE, "racing_lib.planning.best_lap")
+_LAP_CODE = ("racing_lib.experiments.lap",)
+
+# --------------------------------------------------------------------------------------------------
+# Cache keys
+
+
+def _json_default(obj: Any) -> Any:
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
+        return dataclasses.asdict(obj)
+    raise TypeError(f"not JSON-serializable for a cache key: {type(obj).__name__}")
+
+
+def _digest(obj: Any) -> str:
+    """Hash (hex, 16 characters) of a JSON-able object, independent of dict order."""
+    text = json.dumps(obj, sort_keys=True, separators=(",", ":"), default=_json_default)
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def _code_digests() -> dict[str, str]:
+    """Source digests of the plan, best-lap and lap code, read once per run.
+
+    Once per run, because the worker processes keep the code they started with: a file edited
+    during a long run must not make later rows claim code they did not run.
+    """
+    return {
+        "plan": code_digest(_PLAN_CODE),
+        "best-lap": code_digest(_BEST_LAP_CODE),
+        "lap": code_digest(_LAP_CODE),
+    }
+
+
+def _planning_params(row: AblationRow) -> tuple[str, dict[str, Any]]:
+    """Which parameters the row's plan is made with: ("identified" | "vehicle", their values)."""
+    if row.best_lap:
+        from racing_lib.vehicle import VehicleParams
+
+        return "vehicle", dataclasses.asdict(VehicleParams())
+    from racing_lib.model.identified import identified_params
+
+    return "identified", identified_params().to_dict()
+
+
+def _plan_method(row: AblationRow) -> str:
+    return "best-lap" if row.best_lap else str(TUNING_CONFIGS[row.config]["method"])
+
+
+def _plan_options(row: AblationRow) -> dict[str, Any]:
+    # The best lap uses the car's own equations: model options do not apply to it.
+    return {} if row.best_lap else dict(TUNING_CONFIGS[row.config]["options"])
+
+
+def _plan_key_inputs(
+    row: AblationRow, track: Track, spacing: float | None, code: Mapping[str, str]
+) -> dict[str, Any]:
+    which, params = _planning_params(row)
+    return {
+        "kind": "plan",
+        "format": FORMAT,
+        "track": track.name,
+        "track_checksum": track.checksum(),
+        "boundary": track.boundary,
+        "method": _plan_method(row),
+        "options": _plan_options(row),
+        "params": which,
+        "param_values": params,
+        "spacing": spacing,
+        "code": code["best-lap" if row.best_lap else "plan"],
+    }
+
+
+def _row_key_inputs(
+    row: AblationRow,
+    track: Track,
+    plan_key: str,
+    weights: dict[str, float] | None,
+    seeds: Sequence[int],
+    code: Mapping[str, str],
+) -> dict[str, Any]:
+    from racing_lib.model.identified import identified_params
+    from racing_lib.vehicle import VehicleParams
+
+    cfg = TUNING_CONFIGS[row.config]
+    return {
+        "kind": "row",
+        "format": FORMAT,
+        "name": row.name,
+        "track_checksum": track.checksum(),
+        "plan_key": plan_key,
+        "config": row.config,
+        "controller": cfg["controller"],
+        "smooth_transition": bool(cfg.get("smooth_transition", True)),
+        "mpc_options": dict(cfg["options"]),
+        "mpc_params": identified_params().to_dict(),
+        "vehicle": dataclasses.asdict(VehicleParams()),
+        "weights": weights,
+        "seeds": list(seeds),
+        "run_up_m": LapSpec.run_up,
+        "profile_spacing_m": PROFILE_SPACING,
+        "fast_mode": fast_mode(),
+        "code": code["lap"],
+    }
+
+
+# --------------------------------------------------------------------------------------------------
+# A row from its trials
+
+
+def _compact_json(obj: Any) -> str:
+    """One line of JSON without spaces (the profiles are most of a row: keep files small)."""
+    return json.dumps(obj, sort_keys=True, separators=(",", ":"), allow_nan=False)

@@ -1,0 +1,1 @@
+"""Generic optimizers the experiments build on; nothing here knows of cars or tracks."""
