@@ -53,7 +53,7 @@ class Chapter:
     outro: str = ""
 
 
-SETUP = "rng = racing_lib.notebook.setup(seed=0)"
+SETUP = "rng = racing_lib.face.notebook.setup(seed=0)"
 
 # --------------------------------------------------------------------------------------------------
 # Chapter 01
@@ -75,7 +75,7 @@ Allowed tools: `numpy`, `scipy`, and the *evaluation* methods of a `racing_lib.g
 import numpy as np
 from scipy.optimize import minimize_scalar
 
-import racing_lib.notebook
+import racing_lib.face.notebook
 from racing_lib.exercises.ch01 import (
     check_frenet_projection,
     check_frenet_rates,
@@ -181,7 +181,7 @@ Parameters come as a `racing_lib.model.ModelParams` `p`: `p.m` (kg), `p.l_f`, `p
 
 import numpy as np
 
-import racing_lib.notebook
+import racing_lib.face.notebook
 from racing_lib.exercises.ch02 import (
     check_axle_loads,
     check_slip_angles,
@@ -287,7 +287,7 @@ The checks compare with `racing_lib.planning` on the expressway.""",
 
 import numpy as np
 
-import racing_lib.notebook
+import racing_lib.face.notebook
 from racing_lib.exercises.ch03 import (
     check_cornering_speed,
     check_lap_time,
@@ -370,7 +370,7 @@ their force peak. The checks compare with `racing_lib.planning.time_optimal` and
 
 import numpy as np
 
-import racing_lib.notebook
+import racing_lib.face.notebook
 from racing_lib.exercises.ch04 import check_peak_slip_angle, check_spatial_lap_time""",
     exercises=[
         Exercise(
@@ -422,7 +422,7 @@ acceleration to a pedal position. The checks compare with `racing_lib.control.mp
 
 import numpy as np
 
-import racing_lib.notebook
+import racing_lib.face.notebook
 from racing_lib.exercises.ch05 import (
     check_heuristic_trajectory,
     check_pedal_inversion,
@@ -497,7 +497,7 @@ space (logarithms of the weights) to the weights themselves. The checks compare 
 no simulation is needed.""",
     imports="""import numpy as np
 
-import racing_lib.notebook
+import racing_lib.face.notebook
 from racing_lib.exercises.ch06 import check_search_space, check_tuning_objective, synthetic_lap""",
     exercises=[
         Exercise(

@@ -12,7 +12,6 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 import pytest
 
-from racing_lib.cli import main
 from racing_lib.errors import ControlError, RacingLibError, TrackError
 from racing_lib.experiments.ablation import runner as ablation_runner
 from racing_lib.experiments.ablation import table as ablation_table
@@ -33,6 +32,7 @@ from racing_lib.experiments.configs import (
     tuned_weights,
 )
 from racing_lib.experiments.tuning import MPC_WEIGHT_NAMES
+from racing_lib.face.cli import main
 from racing_lib.tracks import Arc, Straight, track_from_segments
 
 #: Plan node spacing of the tests, m: coarse, so that every plan takes well under a second.

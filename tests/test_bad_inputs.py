@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from racing_lib.cli import main
+from racing_lib.face.cli import main
 
 _spec = importlib.util.spec_from_file_location(
     "bad_inputs", Path(__file__).resolve().parents[1] / "tools" / "bad_inputs.py"

@@ -7,7 +7,7 @@ import json
 import numpy as np
 import pytest
 
-from racing_lib.cli import main
+from racing_lib.face.cli import main
 
 
 def test_tracks_json_lists_the_builtin_tracks(capsys):

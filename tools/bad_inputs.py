@@ -208,7 +208,7 @@ def _run(case: Case, cwd: Path) -> tuple[int, str, float, bool]:
     """Run one case as a process: exit code, last stderr line, seconds, whether stdout is empty."""
     tic = time.perf_counter()
     proc = subprocess.run(
-        [sys.executable, "-m", "racing_lib.cli", *case.argv],
+        [sys.executable, "-m", "racing_lib.face.cli", *case.argv],
         cwd=cwd,
         capture_output=True,
         text=True,

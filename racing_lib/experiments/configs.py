@@ -1,4 +1,6 @@
-"""The configurations of the paper's tables: how each is planned and driven, and the weights tuned
+"""The configurations of the paper's tables and the weights tuned for them.
+
+The configurations of the paper's tables: how each is planned and driven, and the weights tuned
 for it (shipped in ``racing_lib/data/tuned_weights.json``).
 """
 
@@ -241,7 +243,9 @@ def config_spec(
     weights: dict[str, float] | None = None,
     **plan_kwargs: Any,
 ) -> Any:
-    """The :class:`~racing_lib.experiments.lap.LapSpec` of a configuration of
+    """The :class:`~racing_lib.experiments.lap.LapSpec` of a configuration.
+
+    The :class:`~racing_lib.experiments.lap.LapSpec` of a configuration of
     :data:`TUNING_CONFIGS`.
 
     Plans ``track`` with :func:`config_plan` unless a ``trajectory`` is given.

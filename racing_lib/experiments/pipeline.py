@@ -95,8 +95,11 @@ class RaceResult:
 
     @property
     def reference(self) -> Trajectory:
-        """The trajectory the controller tracked (the plan; for the nominal controller a slower
-        copy of it)."""
+        """The trajectory the controller tracked.
+
+        The trajectory the controller tracked (the plan; for the nominal controller a slower
+        copy of it).
+        """
         return self.spec.trajectory
 
     @property

@@ -1,4 +1,6 @@
-"""CMA-ES tuning of controller weights over closed-loop laps (paper Section "Hyperparameter
+"""CMA-ES tuning of controller weights over closed-loop laps.
+
+CMA-ES tuning of controller weights over closed-loop laps (paper Section "Hyperparameter
 Optimization"; taught in notebook 06).
 
 The paper tunes the six weights of its MPC cost (v_x, v_y, yaw rate, e_psi, e_y, steering rate)

@@ -165,7 +165,9 @@ def road_overlaps(
 
 
 def thin_dense_rows(xy: np.ndarray, where: str) -> np.ndarray:
-    """Indices of the rows to keep so that their median spacing is at least about
+    """Indices of the rows to keep so that their median spacing is about ``MIN_ROW_SPACING``.
+
+    Indices of the rows to keep so that their median spacing is at least about
     :data:`MIN_ROW_SPACING` (all rows when they are already that far apart), warning if any go.
 
     Parameters

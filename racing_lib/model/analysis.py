@@ -439,8 +439,11 @@ class PredictionError:
         return float(np.percentile(self.errors[measure][:, self._column(measure, horizon)], q))
 
     def fraction_above(self, measure: str, horizon: float, threshold: float) -> float:
-        """Share of the windows whose absolute error of ``measure`` at ``horizon`` exceeds
-        ``threshold`` (in the measure's unit), 0-1."""
+        """Share of the windows whose ``measure`` error at ``horizon`` exceeds ``threshold``, 0-1.
+
+        Share of the windows whose absolute error of ``measure`` at ``horizon`` exceeds
+        ``threshold`` (in the measure's unit), 0-1.
+        """
         col = self.errors[measure][:, self._column(measure, horizon)]
         return float(np.mean(col > threshold))
 

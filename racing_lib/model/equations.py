@@ -250,8 +250,11 @@ def _check_method_domain(method: str, domain: str) -> None:
 
 
 def _cached(fn: Any) -> Any:
-    """Cache a Function builder on its full argument tuple (defaults filled in), so that
-    ``time_dynamics()`` and ``time_dynamics(ModelParams(), ModelOptions())`` share one build."""
+    """Cache a Function builder on its full argument tuple (defaults filled in).
+
+    Cache a Function builder on its full argument tuple (defaults filled in), so that
+    ``time_dynamics()`` and ``time_dynamics(ModelParams(), ModelOptions())`` share one build.
+    """
     signature = inspect.signature(fn)
     inner = functools.lru_cache(maxsize=64)(fn)
 

@@ -37,7 +37,9 @@ __all__ = ["BRAKE_KNEE", "ModelOptions", "ModelParams", "PedalMap"]
 
 @dataclass(frozen=True)
 class ModelOptions:
-    """Which physical effects the model includes (the paper's ablations, Section "Vehicle Model
+    """Which physical effects the model includes (the paper's ablations).
+
+    Which physical effects the model includes (the paper's ablations, Section "Vehicle Model
     Analysis"). Each switch changes exactly the terms it names and nothing else.
 
     Attributes
@@ -166,8 +168,11 @@ class PedalMap:
     # --- construction -----------------------------------------------------------------------------
     @classmethod
     def from_coefficients(cls, coefficients: ArrayLike) -> PedalMap:
-        """Build from ``[m_0, m_xi (6 values), m_thr, m_brk]`` (9 numbers, the order of
-        :meth:`coefficients`)."""
+        """Build from the 9 coefficients of :meth:`coefficients`.
+
+        Build from ``[m_0, m_xi (6 values), m_thr, m_brk]`` (9 numbers, the order of
+        :meth:`coefficients`).
+        """
         c = np.asarray(coefficients, dtype=float).ravel()
         if c.size != NX + 3:
             raise ModelError(
@@ -220,7 +225,9 @@ class PedalMap:
         return out
 
     def throttle_gain(self, v_x: Any) -> Any:
-        """Acceleration added by full throttle at speed ``v_x`` (m/s), m/s^2:
+        """Acceleration added by full throttle at speed ``v_x`` (m/s), m/s^2.
+
+        Acceleration added by full throttle at speed ``v_x`` (m/s), m/s^2:
         ``min(m_thr, p_thr / v_x)`` (``m_thr`` without a power limit).
 
         Works on floats, arrays and CasADi expressions. Below 1 m/s the speed is taken as 1 m/s
@@ -233,8 +240,11 @@ class PedalMap:
         return np.minimum(self.m_thr, self.p_thr / np.maximum(np.asarray(v_x, dtype=float), 1.0))
 
     def _brake_knee(self) -> tuple[float, float, float] | None:
-        """``(u_k, a_k, slope)``: the pedal and deceleration (m/s^2) where braking bends, and the
-        slope below it (m/s^2 per unit pedal); None when braking is linear to full brake."""
+        """Where braking bends: ``(u_k, a_k, slope)``, or None.
+
+        ``(u_k, a_k, slope)``: the pedal and deceleration (m/s^2) where braking bends, and the
+        slope below it (m/s^2 per unit pedal); None when braking is linear to full brake.
+        """
         if self.a_brk_max is None or self.a_brk_max >= self.m_brk:
             return None
         a_k = BRAKE_KNEE * self.a_brk_max
@@ -273,8 +283,11 @@ class PedalMap:
         return float(out[0]) if scalar else out
 
     def limits(self, xi: Any) -> tuple[Any, Any]:
-        """``(a_min, a_max)`` in m/s^2: ``a_x`` at full brake (``u_p=-1``) and full throttle
-        (``u_p=+1``) for state(s) ``xi`` of shape (6,) or (N, 6) (or CasADi columns)."""
+        """``(a_min, a_max)`` in m/s^2 at full brake and full throttle for state(s) ``xi``.
+
+        ``(a_min, a_max)`` in m/s^2: ``a_x`` at full brake (``u_p=-1``) and full throttle
+        (``u_p=+1``) for state(s) ``xi`` of shape (6,) or (N, 6) (or CasADi columns).
+        """
         base = self._base(xi)
         gain = self.throttle_gain(self._speed(xi))
         if not isinstance(base, ca.SX | ca.MX | ca.DM) and np.ndim(xi) == 1:
@@ -282,13 +295,19 @@ class PedalMap:
         return base - self.full_brake(), base + gain
 
     def full_brake(self) -> float:
-        """Deceleration added by full brake, m/s^2: ``a_brk_max`` if the tyres limit it, else
-        ``m_brk``."""
+        """Deceleration added by full brake, m/s^2.
+
+        Deceleration added by full brake, m/s^2: ``a_brk_max`` if the tyres limit it, else
+        ``m_brk``.
+        """
         return self.m_brk if self._brake_knee() is None else float(self.a_brk_max)
 
     def limits_at_speed(self, v_x: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
-        """``(a_min, a_max)`` in m/s^2 at speed(s) ``v_x`` (m/s) with every other state zero
-        (straight driving on the line): arrays shaped like ``v_x``, for speed profiles."""
+        """``(a_min, a_max)`` in m/s^2 at speed(s) ``v_x`` (m/s), driving straight on the line.
+
+        ``(a_min, a_max)`` in m/s^2 at speed(s) ``v_x`` (m/s) with every other state zero
+        (straight driving on the line): arrays shaped like ``v_x``, for speed profiles.
+        """
         v = np.asarray(v_x, dtype=float)
         xi = np.zeros((v.size, NX))
         xi[:, X.VX] = v.ravel()
@@ -424,8 +443,11 @@ class ModelParams:
         return float(F_zf), float(F_zr)
 
     def cornering_stiffness(self, theta: float = 0.0) -> tuple[float, float]:
-        """Linear cornering stiffnesses ``C_alpha = mu F_z0 B C D`` (N/rad) at the static loads: the
-        slope of the Pacejka curve at zero slip."""
+        """Linear cornering stiffnesses ``C_alpha = mu F_z0 B C D`` (N/rad) at the static loads.
+
+        Linear cornering stiffnesses ``C_alpha = mu F_z0 B C D`` (N/rad) at the static loads: the
+        slope of the Pacejka curve at zero slip.
+        """
         F_zf, F_zr = self.static_loads(theta)
         return (
             axle_cornering_stiffness(F_zf, self.mu, self.B_f, self.C_f, self.D_f),

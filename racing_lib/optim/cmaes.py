@@ -366,6 +366,8 @@ class CmaTuner:
         )
 
     # -- the loop -----------------------------------------------------------------------------
+    # long function: one generation loop with its checkpoint, resume and executor paths, which must
+    #   stay in step
     def run(
         self,
         *,

@@ -1,4 +1,6 @@
-"""Trajectory planning (taught in notebook 03): speed profiles, the curvature QP and the
+"""Trajectory planning: speed profiles, the curvature QP and the time-optimal NLP.
+
+Trajectory planning (taught in notebook 03): speed profiles, the curvature QP and the
 time-optimal NLP.
 
 Every planner returns a :class:`Trajectory`; :func:`plan` is the one entry point the command line

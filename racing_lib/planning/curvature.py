@@ -460,6 +460,8 @@ def _lateral_qp(
     return status, np.asarray(z.value).reshape(n, 5), time.perf_counter() - t0
 
 
+# long function: one loop of the paper's iteration (speed profile, linearization, QP, line update,
+#   keep the best), whose state carries from pass to pass
 def solve_curvature(
     track: Any,
     params: Any = None,

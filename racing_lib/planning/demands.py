@@ -57,8 +57,11 @@ class Demand:
 
     @property
     def share(self) -> float:
-        """``peak / limit``: above 1 the car cannot do what the plan asks (NaN without a limit,
-        and for the edge clearance, whose limit is 0 m: negative means over the edge)."""
+        """``peak / limit``: above 1 the car cannot do what the plan asks.
+
+        ``peak / limit``: above 1 the car cannot do what the plan asks (NaN without a limit,
+        and for the edge clearance, whose limit is 0 m: negative means over the edge).
+        """
         if not math.isfinite(self.limit) or self.limit == 0.0:
             return math.nan
         return self.peak / self.limit

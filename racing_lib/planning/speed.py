@@ -126,6 +126,8 @@ def pedal_accel_limits(pedal_map: Any) -> AccelLimits | None:
     )
 
 
+# long function: the forward and backward passes are closures over the tabulated pedal limits and
+#   the node lists, so the per-node loops read local names only
 def speed_profile(
     s: ArrayLike,
     kappa: ArrayLike,

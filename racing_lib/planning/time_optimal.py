@@ -208,6 +208,8 @@ class TimeOptimalResult:
 class _Problem:
     """The built NLP for one grid, parameter set, options and settings."""
 
+    # long function: the NLP's variables, dynamics, bounds and cost, built in the order the paper
+    #   states them
     def __init__(self, grid: TrackGrid, params: Any, options: Any, st: TimeOptimalSettings) -> None:
         import casadi as ca
 
@@ -455,6 +457,8 @@ def ipopt_solver(name: str, nlp: dict[str, Any], st: Any) -> Any:
     return ca.nlpsol(name, "ipopt", nlp, {"ipopt": ipopt, "print_time": False})
 
 
+# long function: the NLP's set-up, solve and fallbacks, read against the paper's formulation in one
+#   place
 def solve_time_optimal(
     track: Any,
     params: Any = None,

@@ -189,8 +189,11 @@ class Trajectory:
 
     @property
     def length(self) -> float:
-        """Length of the closed line, m (the interval from the last node back to the first
-        included)."""
+        """Length of the closed line, m.
+
+        Length of the closed line, m (the interval from the last node back to the first
+        included).
+        """
         return float(self.line_length)
 
     @property
@@ -553,8 +556,11 @@ def _int_or(value: str | None, default: int) -> int:
 def _split_plan_text(
     text: str,
 ) -> tuple[dict[str, str], list[str], list[str], str | None, str]:
-    """A plan file's metadata, header fields, data rows, recorded checksum (or None) and the
-    text the checksum covers (every line above the checksum line)."""
+    """A plan file's parts: metadata, header fields, data rows and checksum.
+
+    A plan file's metadata, header fields, data rows, recorded checksum (or None) and the
+    text the checksum covers (every line above the checksum line).
+    """
     meta: dict[str, str] = {}
     header: list[str] = []
     rows: list[str] = []

@@ -165,7 +165,7 @@ def crucial_corners(track: Track | str) -> tuple[Corner, ...]:
 
 
 def corner_positions(track: Track | str) -> dict[int, float]:
-    """The crucial corners as {number: s (m)} (for ``racing_lib.plotting``'s ``corners``).
+    """The crucial corners as {number: s (m)} (for ``racing_lib.face.plotting``'s ``corners``).
 
     >>> corner_positions("expressway")[5]  # the hairpin  # doctest: +ELLIPSIS
     2943...

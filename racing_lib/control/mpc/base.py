@@ -1,4 +1,6 @@
-"""What the coupled and the decoupled MPC share: the plan table, the track band, the reference,
+"""What the coupled and the decoupled MPC share.
+
+What the coupled and the decoupled MPC share: the plan table, the track band, the reference,
 the linearization along it, the pedal bounds, the fallback when a QP fails, and timing.
 """
 
@@ -221,9 +223,12 @@ class MPCBase:
         self._delta_est = float(self._u_prev[U.DELTA])
 
     def stats(self) -> dict[str, float]:
-        """Counters of the lap: ``qp_failures``, ``fallback_shifted``, ``fallback_brake`` and
+        """Counters of the lap.
+
+        Counters of the lap: ``qp_failures``, ``fallback_shifted``, ``fallback_brake`` and
         ``qp_rescues`` (QPs that OSQP failed and Clarabel was asked to solve; those it solved too
-        are not failures)."""
+        are not failures).
+        """
         out = {k: float(v) for k, v in self._counters.items()}
         out["qp_rescues"] = float(sum(qp.rescues for qp in self._qp_list) - self._rescues_at_reset)
         return out

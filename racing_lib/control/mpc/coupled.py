@@ -1,4 +1,6 @@
-"""The paper's coupled MPC: one QP over the longitudinal and lateral dynamics, linearized along the
+"""The paper's coupled MPC: one QP over the longitudinal and lateral dynamics.
+
+The paper's coupled MPC: one QP over the longitudinal and lateral dynamics, linearized along the
 heuristic trajectory that blends the measured state into the plan.
 """
 
@@ -90,12 +92,17 @@ class CoupledMPC(MPCBase):
 
     @property
     def blend_weights(self) -> np.ndarray:
-        """``lambda_k``, k = 0..N, of the heuristic trajectory: 1 falling linearly to 0 (all 0
-        without the smooth transition), shape (N+1,)."""
+        """``lambda_k``, k = 0..N, of the heuristic trajectory, shape (N+1,).
+
+        ``lambda_k``, k = 0..N, of the heuristic trajectory: 1 falling linearly to 0 (all 0
+        without the smooth transition), shape (N+1,).
+        """
         return self._lam_used.copy()
 
     def heuristic_trajectory(self, xi0: np.ndarray, xi_ref: np.ndarray) -> np.ndarray:
-        """The states the model is linearized at: ``xi_hat_k = xi_ref_k + lambda_k (xi0 -
+        """The states the model is linearized at (the paper's heuristic trajectory).
+
+        The states the model is linearized at: ``xi_hat_k = xi_ref_k + lambda_k (xi0 -
         xi_ref_0)`` (the paper's heuristic trajectory).
 
         Parameters

@@ -1,4 +1,6 @@
-"""The paper's controller ablation: a longitudinal and a lateral MPC, each linearized about the
+"""The paper's controller ablation: a longitudinal and a lateral MPC.
+
+The paper's controller ablation: a longitudinal and a lateral MPC, each linearized about the
 reference alone.
 """
 

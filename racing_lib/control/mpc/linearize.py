@@ -1,4 +1,6 @@
-"""The linear time-varying model the MPC predicts with: the planning model linearized and
+"""The linear time-varying model the MPC predicts with.
+
+The linear time-varying model the MPC predicts with: the planning model linearized and
 discretized per stage, with the steering actuator's lag appended as a state.
 """
 
@@ -30,7 +32,9 @@ __all__ = [
 def substep_linearization(
     params: Any, options: Any, dt: float, substeps: int, jit: bool = False
 ) -> Any:
-    """CasADi Function ``(xi_bar, u_bar, kappa, theta) -> (A_d, B_d, d_d)`` of ``substeps`` chained
+    """CasADi Function ``(xi_bar, u_bar, kappa, theta) -> (A_d, B_d, d_d)`` of chained RK4 steps.
+
+    CasADi Function ``(xi_bar, u_bar, kappa, theta) -> (A_d, B_d, d_d)`` of ``substeps`` chained
     RK4 steps of model.py's :func:`~racing_lib.model.discretize` (step ``dt / substeps``).
 
     Same contract as :func:`racing_lib.model.discrete_linearization`, whose single RK4 step of

@@ -1,4 +1,6 @@
-"""The MPC's QP as it reads on paper, in cvxpy (DPP parameters, OSQP underneath): the readable
+"""The MPC's QP as it reads on paper, in cvxpy: the readable reference.
+
+The MPC's QP as it reads on paper, in cvxpy (DPP parameters, OSQP underneath): the readable
 reference that the fast :class:`~racing_lib.control.mpc.qp_osqp.TrackingQP` must agree with.
 """
 

@@ -271,6 +271,7 @@ class QPShape:
 
 
 def check_qp_data(shape: QPShape, data: QPData) -> None:
+    """Refuse QP data whose arrays do not fit ``shape`` (a ControlError names them)."""
     n, m, N = shape.n_state, shape.n_input, shape.horizon
     expected = {
         "x0": (n,),
@@ -322,6 +323,7 @@ def tracking_cost(shape: QPShape, data: QPData, x: np.ndarray, u: np.ndarray, sl
 
 
 def failed_solution(shape: QPShape, status: str, iterations: int = 0, solve_time: float = 0.0):
+    """A :class:`QPSolution` that reports ``status`` and holds NaN in place of a solution."""
     N, n, m = shape.horizon, shape.n_state, shape.n_input
     return QPSolution(
         success=False,

@@ -18,8 +18,11 @@ __all__ = ["COUPLED_STATES", "LATERAL_STATES", "MX", "MPCSettings"]
 
 
 class MX(IntEnum):
-    """Indices of the coupled MPC's state: the model's state without ``s``, plus the steering
-    actuator's output (see :func:`augment_steering_lag`)."""
+    """Indices of the coupled MPC's state.
+
+    Indices of the coupled MPC's state: the model's state without ``s``, plus the steering
+    actuator's output (see :func:`augment_steering_lag`).
+    """
 
     VX = 0  #: longitudinal velocity, m/s
     VY = 1  #: lateral velocity, m/s

@@ -58,7 +58,7 @@ class Check:
 
     @property
     def difference(self) -> float:
-        """recomputed - shipped (NaN when either is missing)."""
+        """Recomputed - shipped (NaN when either is missing)."""
         if self.shipped is None or self.recomputed is None:
             return math.nan
         return self.recomputed - self.shipped

@@ -166,9 +166,12 @@ def load_table(path: str | os.PathLike[str]) -> dict[str, Any]:
 
 
 def shipped_table_header() -> dict[str, Any]:
-    """The shipped table's header: format, date, trials, wall time and ``provenance`` (the
+    """The shipped table's header.
+
+    The shipped table's header: format, date, trials, wall time and ``provenance`` (the
     machine, BLAS kernel and package versions that made it, see
-    :func:`racing_lib.provenance.environment`)."""
+    :func:`racing_lib.provenance.environment`).
+    """
     data = _read_shipped()
     return {k: v for k, v in data.items() if k != "rows"}
 

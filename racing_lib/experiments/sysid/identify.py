@@ -124,7 +124,7 @@ class IdentificationResult:
         }
 
     def within_tolerance(self, tolerances: dict[str, float] | None = None) -> dict[str, bool]:
-        """Per toleranced value (default :data:`TOLERANCES`): is ``|fitted/true - 1| <= tol``?"""
+        """Per toleranced value (default :data:`TOLERANCES`): ``|fitted/true - 1| <= tol``."""
         tol = TOLERANCES if tolerances is None else tolerances
         err = self.errors()
         missing = sorted(set(tol) - set(err))
@@ -172,6 +172,8 @@ class IdentificationResult:
         }
 
 
+# long function: the four identification steps of the module docstring, in order, each using the
+#   ones before
 def identify(
     logs: Sequence[DriveLog],
     known: ModelParams | None = None,
@@ -351,8 +353,11 @@ def run(seed: int = 0, fast: bool | None = None, out: str | None = None) -> Iden
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """``python -m racing_lib.experiments.sysid [--seed S] [--fast] [--out FILE]``: regenerate the
-    JSON file."""
+    """Regenerate the shipped identified parameters (the command line).
+
+    ``python -m racing_lib.experiments.sysid [--seed S] [--fast] [--out FILE]``: regenerate the
+    JSON file.
+    """
     ap = argparse.ArgumentParser(
         prog="python -m racing_lib.experiments.sysid", description=main.__doc__
     )

@@ -1,4 +1,6 @@
-"""The lateral fits: each axle's Pacejka curve from steady circles, then the steering lag and the
+"""The lateral fits: tyres, steering lag and yaw inertia.
+
+The lateral fits: each axle's Pacejka curve from steady circles, then the steering lag and the
 yaw inertia from steering steps.
 """
 
@@ -69,6 +71,8 @@ def _fit_axle(alpha: np.ndarray, phi: np.ndarray, mu: float) -> tuple[np.ndarray
     return best.x, best
 
 
+# long function: the tyre, steering-lag and inertia fits share one selection of steady and transient
+#   samples
 def _fit_lateral(
     kp: ModelParams, S: _Samples, fit_lag: bool
 ) -> tuple[dict[str, float], dict[str, FitStats]]:

@@ -1,4 +1,6 @@
-"""The longitudinal fits: drag and rolling resistance from the coast-down, the pedal map from laps
+"""The longitudinal fits: drag, rolling resistance, pedal map and braking limit.
+
+The longitudinal fits: drag and rolling resistance from the coast-down, the pedal map from laps
 and pedal steps, the braking limit from full stops.
 """
 

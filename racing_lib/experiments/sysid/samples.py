@@ -1,4 +1,6 @@
-"""From logs to samples: one per control period, derivatives by interval differences, and the
+"""From logs to samples, and the diagnostics every fit reports.
+
+From logs to samples: one per control period, derivatives by interval differences, and the
 regression diagnostics every fit reports.
 """
 

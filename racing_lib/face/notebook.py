@@ -11,7 +11,7 @@ import importlib.metadata
 import numpy as np
 
 from racing_lib.config import fast_mode
-from racing_lib.plotting import set_style
+from racing_lib.face.plotting import set_style
 
 _SOLVERS = ("numpy", "scipy", "casadi", "cvxpy", "osqp", "control", "cma")
 

@@ -212,7 +212,7 @@ def _save_lap_outputs(out_dir: FilePath, track, trajectory, results, report) -> 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from racing_lib import plotting
+    from racing_lib.face import plotting
     from racing_lib.io import atomic_savefig, atomic_write_json
 
     plotting.set_style()
@@ -394,8 +394,11 @@ def _nearest_existing(path: FilePath) -> FilePath:
 
 
 def _check_writable_dir(folder: FilePath, flag: str, target: FilePath) -> None:
-    """``folder`` is, or can be created as, a folder we may write in (nothing is left behind:
-    the test is a temporary file created and removed at once)."""
+    """Whether ``folder`` is, or can be created as, a folder we may write in.
+
+    ``folder`` is, or can be created as, a folder we may write in (nothing is left behind:
+    the test is a temporary file created and removed at once).
+    """
     base = _nearest_existing(folder)
     if not base.is_dir():
         raise RacingLibError(
