@@ -21,6 +21,8 @@ def build_controller(
     options: Any = None,
     weights: dict[str, float] | None = None,
     smooth_transition: bool = True,
+    params: Any = None,
+    steer_tau: float | None = None,
 ) -> Controller:
     """Build a controller by its command-line name for a planned trajectory.
 
@@ -38,6 +40,13 @@ def build_controller(
         MPC weights overriding the defaults.
     smooth_transition : bool
         MPC: blend the linearization trajectory from the current state to the plan.
+    params : ModelParams, optional
+        The model the MPCs predict with: the one the plan was made with, so that plan and
+        controller agree (default: the identified set,
+        :func:`racing_lib.model.identified.identified_params`).
+    steer_tau : float, optional
+        Time constant of the car's steering lag the MPCs compensate, s (default:
+        ``MPCSettings.steer_tau``); pass the identified one for a car identified from its logs.
     """
     if name == "nominal":
         from racing_lib.control.nominal import NominalController
@@ -50,6 +59,8 @@ def build_controller(
         from racing_lib.model.identified import identified_params
 
         settings = MPCSettings(smooth_transition=smooth_transition)
+        if steer_tau is not None:
+            settings = dataclasses.replace(settings, steer_tau=float(steer_tau))
         if weights:
             known = {f.name for f in dataclasses.fields(MPCSettings)}
             unknown = sorted(set(weights) - known)
@@ -60,9 +71,9 @@ def build_controller(
                 )
             settings = dataclasses.replace(settings, **weights)
         cls = CoupledMPC if name == "coupled-mpc" else DecoupledMPC
-        # The controllers predict with the model identified from driving data (chapter 02).
-        return cls(trajectory, params=identified_params(), options=options, track=track,
-                   settings=settings)  # fmt: skip
+        # By default the controllers predict with the model identified from driving data (ch. 02).
+        model = identified_params() if params is None else params
+        return cls(trajectory, params=model, options=options, track=track, settings=settings)
     raise ControlError(f"unknown controller {name!r}; choose one of {', '.join(CONTROLLER_NAMES)}.")
 
 

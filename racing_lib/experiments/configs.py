@@ -257,8 +257,8 @@ def config_spec(
     track : Track
         The track.
     params : ModelParams, optional
-        Planning parameters (default: the identified set,
-        ``racing_lib.model.identified.identified_params``).
+        Planning parameters, which the spec's MPC then predicts with too (default: the identified
+        set, ``racing_lib.model.identified.identified_params``).
     trajectory : Trajectory, optional
         A plan already made for this configuration (for example loaded from a cache): no planning.
     weights : dict, optional
@@ -279,6 +279,7 @@ def config_spec(
         smooth_transition=bool(cfg.get("smooth_transition", True)),
         options=ModelOptions(**cfg["options"]),
         weights=weights,
+        params=params,  # the plan's parameters travel to the controller (None: identified)
     )
 
 

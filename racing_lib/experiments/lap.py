@@ -436,6 +436,11 @@ class LapSpec:
         The car starts this far before the start/finish line, on the plan, at its speed, m.
     vehicle : VehicleParams or None
         The simulated car's true parameters (default car when None).
+    params : ModelParams or None
+        The model the plan was made with, which the MPC then predicts with (None: the identified
+        set, :func:`racing_lib.model.identified.identified_params`).
+    steer_tau : float or None
+        Steering lag the MPC compensates, s (None: ``MPCSettings.steer_tau``).
     """
 
     track: Track
@@ -446,6 +451,8 @@ class LapSpec:
     weights: dict[str, float] | None = None
     run_up: float = 150.0
     vehicle: Any = None
+    params: Any = None
+    steer_tau: float | None = None
 
 
 class _StartOnPlan:
@@ -493,6 +500,8 @@ def make_controller(spec: LapSpec) -> Controller:
         options=spec.options,
         weights=spec.weights,
         smooth_transition=spec.smooth_transition,
+        params=spec.params,
+        steer_tau=spec.steer_tau,
     )
 
 

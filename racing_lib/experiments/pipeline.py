@@ -430,6 +430,8 @@ def race(
         smooth_transition=smooth_transition,
         options=options,
         weights=lap_weights,
+        # The MPC predicts with the parameters the plan was made with (None: the identified set).
+        params=dict(plan_kwargs or {}).get("params") if reference is None else None,
     )
     laps = []
     for i in range(int(trials)):
