@@ -25,7 +25,7 @@ from typing import Any, Protocol, TypeVar
 
 import numpy as np
 
-from racing_lib.errors import PlantError, RacingLibError
+from racing_lib.errors import PlantError
 from racing_lib.geometry import (
     FrenetTracker,
     Path,
@@ -400,15 +400,6 @@ def run_trials(
     return list(executor.map(lap, seeds))
 
 
-def assert_lap_ok(metrics: LapMetrics) -> None:
-    """Raise a readable error if a lap was not completed (used by scripts and notebooks)."""
-    if not metrics.completed:
-        raise RacingLibError(
-            f"the lap (seed {metrics.seed}) was not completed; look at the log for where the car "
-            "stopped making progress (plot log.s_track over log.t)."
-        )
-
-
 # --------------------------------------------------------------------------------------------------
 # One lap of the simulated car, described by plain data (so trials can run in other processes)
 
@@ -525,8 +516,3 @@ def drive_lap(spec: LapSpec, seed: int | None = None, progress: bool = False) ->
         seed=seed,
         progress=progress,
     )
-
-
-def lap_metrics(spec: LapSpec, seed: int | None = None) -> LapMetrics:
-    """Only the metrics of :func:`drive_lap` (what trials send back between processes)."""
-    return drive_lap(spec, seed=seed).metrics

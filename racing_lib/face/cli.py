@@ -132,16 +132,7 @@ def cmd_plan(args: argparse.Namespace) -> int:
     if args.out:
         traj.save_csv(args.out)
         _say(f"plan written to {args.out}")
-    fields = {
-        "track": track.name,
-        "method": args.method,
-        "length_m": float(track.length),
-        "nodes": int(len(traj.s)),
-        "lap_time_s": float(traj.lap_time),
-        "solve_time_s": float(result.solve_time),
-        "iterations": int(result.iterations),
-        "status": str(result.status),
-    }
+    fields = result.summary(track)
     if args.json:
         _emit_json(fields)
     else:

@@ -226,38 +226,3 @@ def plot_profiles(
     ax.set_ylabel(ylabel)
     ax.legend(loc="best", fontsize=8)
     return ax
-
-
-def plot_gg(
-    a_x: np.ndarray,
-    a_y: np.ndarray,
-    *,
-    mu_g: float | None = None,
-    ax: Axes | None = None,
-    label: str = "",
-) -> Axes:
-    """The g-g diagram: lateral against longitudinal acceleration, m/s^2.
-
-    Parameters
-    ----------
-    a_x, a_y : array
-        Longitudinal and lateral acceleration, m/s^2.
-    mu_g : float, optional
-        Draw the friction circle of this radius, m/s^2.
-    ax : Axes, optional
-        Where to draw.
-    label : str
-        Legend label of the points.
-    """
-    if ax is None:
-        _, ax = plt.subplots(figsize=(4.5, 4.5))
-    ax.plot(a_y, a_x, ".", ms=2, alpha=0.6, label=label or None)
-    if mu_g is not None:
-        phi = np.linspace(0, 2 * np.pi, 200)
-        ax.plot(mu_g * np.cos(phi), mu_g * np.sin(phi), "k--", lw=0.8, label="friction circle")
-    ax.set_xlabel("a_y [m/s$^2$]")
-    ax.set_ylabel("a_x [m/s$^2$]")
-    ax.set_aspect("equal")
-    if label or mu_g is not None:
-        ax.legend(loc="best", fontsize=8)
-    return ax

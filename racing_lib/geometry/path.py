@@ -205,12 +205,6 @@ class Path:
         p = self._xy(np.asarray(s, dtype=float))
         return p[..., 0], p[..., 1]
 
-    def tangent(self, s: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
-        """Unit tangent (cos psi, sin psi) at s."""
-        d = self._xy(np.asarray(s, dtype=float), 1)
-        v = np.hypot(d[..., 0], d[..., 1])
-        return d[..., 0] / v, d[..., 1] / v
-
     def heading(self, s: ArrayLike) -> np.ndarray:
         """Heading psi(s), rad, continuous over one lap (grows by 2 pi per CCW lap)."""
         s = np.mod(np.asarray(s, dtype=float), self.length)

@@ -102,11 +102,6 @@ class SearchSpace:
             upper=tuple(float(bounds[n][2]) for n in names),
         )
 
-    @property
-    def dimension(self) -> int:
-        """Number of parameters."""
-        return len(self.names)
-
     def x0(self) -> np.ndarray:
         """The starting point in log10 space."""
         return np.log10(np.asarray(self.initial, dtype=float))
@@ -120,10 +115,6 @@ class SearchSpace:
         lo, hi = self.log_bounds()
         xc = np.clip(np.asarray(x, dtype=float), lo, hi)
         return {name: float(10.0**v) for name, v in zip(self.names, xc, strict=True)}
-
-    def to_x(self, params: Mapping[str, float]) -> np.ndarray:
-        """The log10-space point of a parameter dict."""
-        return np.log10(np.asarray([float(params[n]) for n in self.names]))
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready description."""

@@ -97,14 +97,14 @@ class PlanResult:
         """The fields of ``racing-lib plan --json``."""
         traj = self.trajectory
         return {
-            "track": traj.track_name or getattr(track, "name", ""),
+            "track": getattr(track, "name", None) or traj.track_name,
             "method": self.method,
             "length_m": float(getattr(track, "length", traj.length)),
             "nodes": traj.n,
             "lap_time_s": float(traj.lap_time),
             "solve_time_s": float(self.solve_time),
             "iterations": int(self.iterations),
-            "status": self.status,
+            "status": str(self.status),
         }
 
 

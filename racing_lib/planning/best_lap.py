@@ -61,7 +61,7 @@ from racing_lib.planning.time_optimal import (
 )
 from racing_lib.planning.trajectory import Trajectory
 from racing_lib.vehicle import VehicleParams
-from racing_lib.vehicle.dynamics import tyre_limits
+from racing_lib.vehicle.dynamics import SimState, tyre_limits
 
 __all__ = [
     "BestLapResult",
@@ -284,7 +284,11 @@ def _node_function(p: VehicleParams, st: BestLapSettings) -> tuple[Any, list[flo
         _smooth_ops(st.smoothing),
     )
     s_dot, e_psi_dot, e_y_dot = frenet_kinematics(vx, vy, r, e_psi, e_y, kap, ops)
-    rates = ca.vertcat(d_state[3], d_state[4], d_state[5], d_state[6], e_psi_dot, e_y_dot)
+    rates = ca.vertcat(
+        *(d_state[i] for i in (SimState.VX, SimState.VY, SimState.R, SimState.DELTA)),
+        e_psi_dot,
+        e_y_dot,
+    )
     f = rates / s_dot
 
     # Slip angles as in the vector field (its speed clamp is inactive above v_min).

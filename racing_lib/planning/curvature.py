@@ -65,6 +65,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
+from enum import IntEnum
 from typing import Any
 
 import numpy as np
@@ -364,6 +365,16 @@ def steady_cornering(
 _LAT = ("VY", "R", "EPSI", "EY")
 
 
+class QPVar(IntEnum):
+    """Columns of one node of the curvature QP: the lateral state (as ``_LAT``), then steering."""
+
+    VY = 0  #: lateral velocity, m/s
+    R = 1  #: yaw rate, rad/s
+    EPSI = 2  #: heading error to the centerline, rad
+    EY = 3  #: lateral offset from the centerline (left positive), m
+    DELTA = 4  #: steering angle, rad
+
+
 def _lateral_qp(
     A: np.ndarray,
     B: np.ndarray,
@@ -385,9 +396,10 @@ def _lateral_qp(
     import cvxpy as cp
 
     n = grid.n
-    nz = 5 * n  # per node: v_y, r, e_psi, e_y, delta
-    ix = np.arange(n)[:, None] * 5 + np.arange(4)[None, :]  # state columns of node k
-    idl = np.arange(n) * 5 + 4  # delta column of node k
+    width = len(QPVar)  # columns per node: the lateral state, then delta
+    nz = width * n
+    ix = np.arange(n)[:, None] * width + np.arange(QPVar.DELTA)[None, :]  # state columns, node k
+    idl = np.arange(n) * width + QPVar.DELTA  # delta column of node k
     nxt = (np.arange(n) + 1) % n
     h = 0.5 * grid.ds[:, None, None]
     eye = np.eye(4)[None, :, :]
@@ -416,7 +428,7 @@ def _lateral_qp(
     q_rows = np.concatenate(
         [np.arange(n), n + np.arange(n), 2 * n + np.arange(n), 2 * n + np.arange(n)]
     )
-    q_cols = np.concatenate([ix[:, 1], ix[:, 0], idl, idl[np.arange(n) - 1]])
+    q_cols = np.concatenate([ix[:, QPVar.R], ix[:, QPVar.VY], idl, idl[np.arange(n) - 1]])
     q_vals = np.concatenate(
         [
             wheelbase / v_hat,
@@ -428,11 +440,13 @@ def _lateral_qp(
     Q = sp.csr_matrix((q_vals, (q_rows, q_cols)), shape=(3 * n, nz))
     # Proximal term sqrt(w_prox) (e_y - e_y_prev): on straights the curvature does not care where
     # the line lies, and without it the line drifts there from one iteration to the next.
-    P = sp.csr_matrix((np.full(n, math.sqrt(st.w_prox)), (np.arange(n), ix[:, 3])), shape=(n, nz))
+    P = sp.csr_matrix(
+        (np.full(n, math.sqrt(st.w_prox)), (np.arange(n), ix[:, QPVar.EY])), shape=(n, nz)
+    )
     e_prev = np.zeros(n) if e_y_prev is None else e_y_prev
     lb = np.full(nz, -np.inf)
     ub = np.full(nz, np.inf)
-    lb[ix[:, 3]], ub[ix[:, 3]] = grid.ey_min, grid.ey_max
+    lb[ix[:, QPVar.EY]], ub[ix[:, QPVar.EY]] = grid.ey_min, grid.ey_max
     lb[idl], ub[idl] = -st.delta_max, st.delta_max
     z = cp.Variable(nz)
     prob = cp.Problem(
@@ -581,14 +595,14 @@ def solve_curvature(
             if raise_on_failure:
                 raise PlanningError(msg)
             break
-        change = float(np.max(np.abs(new[:, 3] - e_y)))
+        change = float(np.max(np.abs(new[:, QPVar.EY] - e_y)))
         history.append(change)
         if sol is not None and it > st.full_steps:
             # Damped fixed-point step: the line and its speed estimate feed each other, and on some
             # tracks the undamped iteration swings between two lines by a metre or two.
             new = sol + st.line_step * (new - sol)
         sol = new
-        v_y, e_psi, e_y = new[:, 0], new[:, 2], new[:, 3]
+        v_y, e_psi, e_y = new[:, QPVar.VY], new[:, QPVar.EPSI], new[:, QPVar.EY]
         kappa_line, s_line, len_line = grid.line_curvature(e_y)
         prof = speed_profile(
             s_line, kappa_line, params, pedal, grid.theta, st.v_top, options, length=len_line
@@ -631,9 +645,9 @@ def solve_curvature(
         lap_times=lap_times,
         e_y=e_y,
         e_psi=e_psi,
-        v_y=sol[:, 0],
-        r=sol[:, 1],
-        delta=sol[:, 4],
+        v_y=sol[:, QPVar.VY],
+        r=sol[:, QPVar.R],
+        delta=sol[:, QPVar.DELTA],
         v_x=prof.v,
         a_x=prof.a_x,
         grid=grid,
@@ -663,10 +677,10 @@ def _trajectory_from_line(
         x,
         y,
         vx=v,
-        vy=sol[:, 0],
+        vy=sol[:, QPVar.VY],
         r=v * kappa_line,
         ax=prof.a_x,
-        delta=sol[:, 4],
+        delta=sol[:, QPVar.DELTA],
         dt=dt,
         track=track,
         method="curvature",
