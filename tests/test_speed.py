@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -53,10 +54,11 @@ def test_drag_lowers_the_circle_speed_to_the_friction_ellipse_value():
 def test_straight_forward_pass_matches_constant_acceleration():
     s = np.linspace(0.0, 500.0, 501)
     v0 = 10.0
+    # A point mass: no drag, no rolling resistance, no pedal map, so a = mu g everywhere.
+    point_mass = SimpleNamespace(mu=1.25, m=1355.2, C_xw=0.0, c_rr=0.0, D_f=1.0, D_r=1.0)
     prof = speed_profile(
-        s, np.zeros_like(s), None, options=NO_DRAG, v_top=1e3, closed=False, v_start=v0
+        s, np.zeros_like(s), point_mass, options=NO_DRAG, v_top=1e3, closed=False, v_start=v0
     )
-    # No drag, no rolling resistance, no pedal map: a = mu g everywhere.
     a = 1.25 * G
     np.testing.assert_allclose(prof.v, np.sqrt(v0**2 + 2 * a * s), rtol=1e-9)
     np.testing.assert_allclose(prof.a_x[:-1], a, rtol=1e-9)

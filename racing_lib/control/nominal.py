@@ -19,12 +19,17 @@ from racing_lib.geometry import (
     Path,
 )
 from racing_lib.interfaces import Command, Observation
+from racing_lib.vehicle.params import VehicleParams
 
 SpeedFunction = Callable[[float], float]
 
 #: Fraction of a plan's speed the nominal controller is asked to drive at by default: pure pursuit
 #: has no model of grip, so it laps the built-in tracks cleanly only with a margin (chapter 01).
 MODERATE_SPEED_SCALE = 0.75
+
+
+#: The car whose data sheet gives the default wheelbase and steering limit.
+_CAR = VehicleParams()
 
 
 @dataclass(frozen=True)
@@ -34,7 +39,7 @@ class NominalSettings:
     Attributes
     ----------
     wheelbase : float
-        l_f + l_r of the car, m (the paper's Demio: 2.5701 m).
+        l_f + l_r of the car, m (default: the simulated car's, 2.5701 m).
     lookahead_min : float
         Pure-pursuit look-ahead distance at standstill, m.
     lookahead_time : float
@@ -53,10 +58,10 @@ class NominalSettings:
         Control period the integrator assumes, s (the simulated car's 0.1 s).
     """
 
-    wheelbase: float = 2.5701
+    wheelbase: float = _CAR.wheelbase
     lookahead_min: float = 4.0
     lookahead_time: float = 0.3
-    max_steer: float = 0.5
+    max_steer: float = _CAR.steer_max
     kp: float = 0.5
     ki: float = 0.05
     preview_time: float = 0.6

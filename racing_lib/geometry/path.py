@@ -37,7 +37,7 @@ from racing_lib.geometry.spline import (
     wrap_angle,
 )
 
-__all__ = ["DUPLICATE_TOL", "FrenetTracker", "Path"]
+__all__ = ["DUPLICATE_TOL", "FrenetTracker", "Path", "chord_arc_length"]
 
 _RESOLUTION = 0.5  # [m] knot spacing of the arc-length spline every Path is resampled to
 DUPLICATE_TOL = 1e-3  # [m] two input points closer than this are the same point
@@ -56,6 +56,17 @@ def _coordinates(x: ArrayLike, y: ArrayLike) -> np.ndarray:
     if xa.size != ya.size:
         raise TrackError(f"Path x has {xa.size} values but y has {ya.size}; give one y per x (m).")
     return np.column_stack([xa, ya])
+
+
+def chord_arc_length(x: np.ndarray, y: np.ndarray, length: float) -> np.ndarray:
+    """Arc length of closed-loop nodes (x, y), m from the first: chords scaled to ``length``.
+
+    Chords fall short of a spline's arc length by O(ds^3 kappa^2) per interval; scaling them to
+    the spline's ``length`` (m) removes the error that would add up over a lap.
+    """
+    chord = np.hypot(np.diff(np.append(x, x[0])), np.diff(np.append(y, y[0])))
+    s = np.concatenate(([0.0], np.cumsum(chord[:-1])))
+    return s * float(length) / float(np.sum(chord))
 
 
 class Path:

@@ -92,6 +92,7 @@ from racing_lib.vehicle import (
     longitudinal_load_transfer,
     pacejka_lateral,
     rolling_resistance,
+    slip_angles,
     static_axle_loads,
 )
 
@@ -166,8 +167,7 @@ def _equations(
 
     # Slip angles, Eq. (11), with a guarded v_x so standstill does not divide by zero
     v_x_safe = _smooth_max(v_x, VX_GUARD, VX_GUARD_WIDTH)
-    alpha_f = delta - (v_y + p.l_f * r) / v_x_safe
-    alpha_r = -(v_y - p.l_r * r) / v_x_safe
+    alpha_f, alpha_r = slip_angles(v_x_safe, v_y, r, delta, p.l_f, p.l_r, ca, small_angle=True)
 
     # Tyre force per newton of load: the simplified Pacejka force is proportional to F_z
     phi_f = pacejka_lateral(alpha_f, 1.0, p.mu, p.B_f, p.C_f, p.D_f)

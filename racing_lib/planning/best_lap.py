@@ -62,6 +62,7 @@ from racing_lib.planning.time_optimal import (
 from racing_lib.planning.trajectory import Trajectory
 from racing_lib.vehicle import VehicleParams
 from racing_lib.vehicle.dynamics import SimState, tyre_limits
+from racing_lib.vehicle.forces import slip_angles
 
 __all__ = [
     "BestLapResult",
@@ -292,8 +293,7 @@ def _node_function(p: VehicleParams, st: BestLapSettings) -> tuple[Any, list[flo
     f = rates / s_dot
 
     # Slip angles as in the vector field (its speed clamp is inactive above v_min).
-    alpha_f = delta - ca.atan((vy + p.l_f * r) / vx)
-    alpha_r = -ca.atan((vy - p.l_r * r) / vx)
+    alpha_f, alpha_r = slip_angles(vx, vy, r, delta, p.l_f, p.l_r, CASADI_OPS, small_angle=False)
     rate = 1.0 / (st.rate_margin * p.steer_tau * p.steer_rate_max)
     path = [
         (z[V.AXT] - a_ground[0]) / _SCALE[V.AXT],

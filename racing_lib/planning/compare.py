@@ -24,7 +24,6 @@ from typing import Any
 import numpy as np
 
 from racing_lib.errors import PlanningError
-from racing_lib.planning.speed import speed_profile
 from racing_lib.planning.trajectory import Trajectory, default_model_inputs
 
 
@@ -107,29 +106,11 @@ def speed_profile_trajectory(
     path = Path(x, y, check=False)
     n = max(16, int(round(path.length / spacing)))
     s = np.asarray(path.sample(n=n), float)
-    kappa = np.asarray(path.curvature(s), float)
     xs, ys = path.position(s)
     s_center, _ = track.centerline.to_frenet_along(xs, ys)
     theta = np.asarray(track.grade(np.asarray(s_center, float)), float)
-    prof = speed_profile(
-        s, kappa, params, pedal_map, theta, v_top, options, length=float(path.length)
-    )
-    v = prof.v
-    dt = 2.0 * np.diff(np.append(s, path.length)) / (v + np.roll(v, -1))
-    wheelbase = float(getattr(params, "l_f", 0.9338) + getattr(params, "l_r", 1.6363))
-    return Trajectory.from_states(
-        xs,
-        ys,
-        vx=v,
-        vy=np.zeros(n),
-        r=v * kappa,
-        ax=prof.a_x,
-        delta=np.arctan(wheelbase * kappa),
-        dt=dt,
-        track=track,
-        method=method,
-        model_options=options,
-        info={"speed_profile_success": prof.success},
+    return Trajectory.at_speed_profile(
+        track, path, s, theta, params, pedal_map, options, v_top, method=method
     )
 
 

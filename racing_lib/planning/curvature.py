@@ -72,7 +72,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from racing_lib.errors import PlanningError
-from racing_lib.planning.speed import speed_profile
+from racing_lib.planning.speed import segment_times, speed_profile
 from racing_lib.planning.trajectory import Trajectory, default_model_inputs
 
 #: Body width of the default car (racing_lib.vehicle.VehicleParams.width), m.
@@ -185,13 +185,11 @@ class TrackGrid:
 
     def line_curvature(self, e_y: np.ndarray) -> np.ndarray:
         """Curvature (1/m) at the nodes of the line with offsets e_y, from a spline through it."""
-        from racing_lib.geometry import Path
+        from racing_lib.geometry.path import Path, chord_arc_length
 
         x, y, _ = self.line_xy(e_y)
         path = Path(x, y, check=False)
-        # The spline's arc length of each node: chord lengths scaled to the spline's length.
-        chord = np.hypot(np.diff(np.append(x, x[0])), np.diff(np.append(y, y[0])))
-        s_line = np.concatenate(([0.0], np.cumsum(chord[:-1]))) * path.length / chord.sum()
+        s_line = chord_arc_length(x, y, path.length)
         return np.asarray(path.curvature(s_line), float), s_line, path.length
 
 
@@ -672,7 +670,7 @@ def _trajectory_from_line(
     x, y, _ = grid.line_xy(e_y, e_psi)
     v = prof.v
     ds_line = np.diff(np.append(prof.s, line_length))
-    dt = 2.0 * ds_line / (v + np.roll(v, -1))
+    dt = segment_times(ds_line, v, np.roll(v, -1))
     return Trajectory.from_states(
         x,
         y,

@@ -27,6 +27,8 @@ from typing import Any
 
 import numpy as np
 
+from racing_lib.vehicle.forces import NUMPY_OPS, slip_angles
+
 __all__ = ["Demand", "format_demands", "plan_demands"]
 
 
@@ -122,8 +124,9 @@ def plan_demands(
     use = np.hypot(a_long / grip_x, a_lat / grip)
 
     v_safe = np.maximum(vx, 1.0)
-    alpha_f = delta - np.arctan((vy + params.l_f * r) / v_safe)
-    alpha_r = -np.arctan((vy - params.l_r * r) / v_safe)
+    alpha_f, alpha_r = slip_angles(
+        v_safe, vy, r, delta, params.l_f, params.l_r, NUMPY_OPS, small_angle=False
+    )
     a_f, a_r = params.peak_slip_angle()
     steer_rate = np.abs(np.roll(delta, -1) - delta) / dt
     power = params.m * np.maximum(ax, 0.0) * vx / 1e3

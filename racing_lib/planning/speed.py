@@ -31,11 +31,14 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from racing_lib.errors import PlanningError
+from racing_lib.model.params import ModelParams
 
 G = 9.81  # gravitational acceleration, m/s^2
 
 #: Top speed used when neither the caller nor the parameters give one: 190 km/h, m/s.
 DEFAULT_V_TOP = 190.0 / 3.6
+#: Where a parameter set leaves a value out: the planning model's defaults (the paper's table).
+_DEFAULTS = ModelParams()
 
 AccelLimits = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
 
@@ -82,14 +85,23 @@ class SpeedProfile:
         return np.interp(np.asarray(s, dtype=float), self.s, self.v, period=length)
 
 
-def _param(params: Any, names: tuple[str, ...], default: float) -> float:
-    """First attribute of ``params`` found among ``names`` (parameter sets differ in spelling)."""
-    for name in names:
-        if params is not None and hasattr(params, name):
-            value = getattr(params, name)
-            if value is not None:
-                return float(value)
-    return float(default)
+def _param(params: Any, name: str) -> float:
+    """``params.name`` as a float, or the planning model's default (:class:`ModelParams`).
+
+    Any object with the attribute names of :class:`ModelParams` serves (the simulated car's
+    :class:`~racing_lib.vehicle.VehicleParams` shares them), so a value is never restated here.
+    """
+    value = getattr(params, name, None)
+    return float(getattr(_DEFAULTS, name) if value is None else value)
+
+
+def segment_times(ds: ArrayLike, v_start: ArrayLike, v_end: ArrayLike) -> np.ndarray:
+    """Time to cover segments of length ``ds`` (m) from ``v_start`` to ``v_end`` (m/s), s.
+
+    ``2 ds / (v_start + v_end)``: the segment's length over its mean speed, exact for a uniform
+    acceleration along it (the trapezoidal rule for ``dt = ds / v``).
+    """
+    return 2.0 * ds / (v_start + v_end)
 
 
 def pedal_accel_limits(pedal_map: Any) -> AccelLimits | None:
@@ -154,8 +166,9 @@ def speed_profile(
         Curvature of the path at the nodes, 1/m.
     params : ModelParams, optional
         Planning parameters; read: ``mu``, ``D_f``, ``D_r`` (the friction circle's radius is
-        ``mu min(D_f, D_r) g``), ``m`` (kg), ``C_xw`` (kg/m), ``c_rr`` (-), ``v_top``/``v_max``
-        (m/s). Defaults: the paper's Demio (mu 1.25, D 1, m 1355.2, C_xw 0.1302).
+        ``mu min(D_f, D_r) g``), ``m`` (kg), ``C_xw`` (kg/m), ``c_rr`` (-) and ``pedal``. Any
+        object with these names serves (the simulated car's ``VehicleParams`` does); a missing
+        value, or no parameters at all, takes the default of ``ModelParams()``.
     pedal_map : PedalMap or callable, optional
         Tire acceleration limits a_x in [a_min(v), a_max(v)], m/s^2 (see
         :func:`pedal_accel_limits`); default ``params.pedal``. Without any, the tires' friction
@@ -164,7 +177,7 @@ def speed_profile(
         Road grade, rad, positive uphill; it reduces the vertical load (cos) and adds g sin(theta)
         to the longitudinal balance.
     v_top : float, optional
-        Top speed cap, m/s (default: ``params.v_top`` if present, else 190 km/h).
+        Top speed cap, m/s (default :data:`DEFAULT_V_TOP`, 190 km/h).
     options : ModelOptions, optional
         ``options.drag`` switches the aerodynamic drag C_xw v^2 on/off (default on).
     length : float, optional
@@ -219,13 +232,15 @@ def speed_profile(
     theta = np.zeros(n) if theta is None else np.broadcast_to(np.asarray(theta, float), (n,))
     a_z = np.zeros(n) if a_z is None else np.broadcast_to(np.asarray(a_z, float), (n,))
 
-    mu = _param(params, ("mu",), 1.25)
-    mass = _param(params, ("m", "mass"), 1355.2)
+    if params is None:
+        params = _DEFAULTS
+    mu = _param(params, "mu")
+    mass = _param(params, "m")
     drag_on = True if options is None else bool(getattr(options, "drag", True))
-    c_xw = _param(params, ("C_xw", "c_xw"), 0.1302) if drag_on else 0.0
-    c_rr = _param(params, ("c_rr", "C_rr"), 0.0)
+    c_xw = _param(params, "C_xw") if drag_on else 0.0
+    c_rr = _param(params, "c_rr")
     if v_top is None:
-        v_top = _param(params, ("v_top", "v_max", "top_speed"), DEFAULT_V_TOP)
+        v_top = DEFAULT_V_TOP
     if mu <= 0 or mass <= 0 or v_top <= 0:
         raise PlanningError(
             f"speed_profile needs positive mu, mass and top speed, got mu={mu}, m={mass}, "
@@ -242,7 +257,7 @@ def speed_profile(
     # D is below 1 where the car's load-sensitive tyres lose grip to load transfer). Planning
     # with mu g alone asked the car for 12.3 m/s^2 where it had 10.3 and slid wide when braking
     # into corners.
-    d_peak = min(_param(params, ("D_f",), 1.0), _param(params, ("D_r",), 1.0))
+    d_peak = min(_param(params, "D_f"), _param(params, "D_r"))
     grip = mu * d_peak * g_eff  # friction-circle radius, m/s^2
     abs_k = np.abs(kappa)
     with np.errstate(divide="ignore"):
@@ -348,8 +363,7 @@ def speed_profile(
         )
     # Pairs of nodes (k, k+1); on a closed path the last pair wraps to the first node.
     v_pairs, v_next = (v, np.roll(v, -1)) if closed else (v[:-1], v[1:])
-    # dt = ds / mean(v): exact for uniform acceleration between nodes.
-    dt = 2.0 * ds / (v_pairs + v_next)
+    dt = segment_times(ds, v_pairs, v_next)
     a_x = (v_next**2 - v_pairs**2) / (2.0 * ds)
     if not closed:
         a_x = np.append(a_x, a_x[-1])

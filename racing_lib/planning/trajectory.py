@@ -27,7 +27,7 @@ from numpy.typing import ArrayLike
 
 from racing_lib.errors import PlanningError, RacingLibError
 from racing_lib.io import atomic_write_text
-from racing_lib.planning.speed import speed_profile
+from racing_lib.planning.speed import segment_times, speed_profile
 
 #: Version of the plan CSV format written by :meth:`Trajectory.save_csv`.
 PLAN_FORMAT_VERSION = 2
@@ -476,37 +476,67 @@ class Trajectory:
         line = track.centerline
         n = max(8, int(round(line.length / spacing)))
         s = np.asarray(line.sample(n=n), float)
-        kappa = np.asarray(line.curvature(s), float)
         theta = np.asarray(track.grade(s), float)
-        prof = speed_profile(
-            s, kappa, params, pedal_map, theta, v_top, options, length=float(line.length)
+        return cls.at_speed_profile(
+            track, line, s, theta, params, pedal_map, options, v_top, method="centerline"
         )
-        x, y = line.position(s)
+
+    @classmethod
+    def at_speed_profile(
+        cls,
+        track: Any,
+        path: Any,
+        s: np.ndarray,
+        theta: np.ndarray,
+        params: Any,
+        pedal_map: Any,
+        options: Any,
+        v_top: float | None,
+        method: str,
+    ) -> Trajectory:
+        """A closed line driven at its quasi-steady speed profile.
+
+        Parameters
+        ----------
+        track : Track
+            The track the line lies on (the plan's metadata).
+        path : Path
+            The closed line.
+        s : ndarray
+            Arc length of the nodes along ``path``, m, from 0.
+        theta : ndarray
+            Road grade at the nodes, rad.
+        params, pedal_map, options, v_top
+            As for :func:`racing_lib.planning.speed.speed_profile`.
+        method : str
+            Label stored in the trajectory's ``method``.
+
+        Returns
+        -------
+        Trajectory
+            ``v_y`` is zero and ``delta`` the kinematic steering angle of the line.
+        """
+        kappa = np.asarray(path.curvature(s), float)
+        prof = speed_profile(
+            s, kappa, params, pedal_map, theta, v_top, options, length=float(path.length)
+        )
+        x, y = path.position(s)
         v = prof.v
-        wheelbase = _param_sum(params, ("l_f", "l_r"), 2.5701)
-        dt = 2.0 * np.diff(np.append(s, line.length)) / (v + np.roll(v, -1))
-        traj = cls.from_states(
+        wheelbase = float(params.l_f + params.l_r)
+        return cls.from_states(
             x,
             y,
             vx=v,
-            vy=np.zeros(n),
+            vy=np.zeros(len(s)),
             r=v * kappa,
             ax=prof.a_x,
             delta=np.arctan(wheelbase * kappa),  # kinematic steering angle of the arc
-            dt=dt,
+            dt=segment_times(np.diff(np.append(s, path.length)), v, np.roll(v, -1)),
             track=track,
-            method="centerline",
+            method=method,
             model_options=options,
             info={"speed_profile_success": prof.success},
         )
-        return traj
-
-
-def _param_sum(params: Any, names: tuple[str, ...], default: float) -> float:
-    try:
-        return float(sum(getattr(params, n) for n in names))
-    except (AttributeError, TypeError):
-        return default
 
 
 def default_model_inputs(params: Any, pedal_map: Any, options: Any) -> tuple[Any, Any, Any]:
@@ -533,11 +563,9 @@ def _node_arc_length(path: Any, x: np.ndarray, y: np.ndarray) -> np.ndarray:
     if nodes is not None and len(nodes) == len(x):
         s = np.asarray(nodes, float)
         return s - s[0]
-    # Chord lengths differ from the spline's arc length by O(ds^3 kappa^2): scale them to its
-    # length.
-    chord = np.hypot(np.diff(np.append(x, x[0])), np.diff(np.append(y, y[0])))
-    s = np.concatenate(([0.0], np.cumsum(chord[:-1])))
-    return s * float(path.length) / float(np.sum(chord))
+    from racing_lib.geometry.path import chord_arc_length
+
+    return chord_arc_length(x, y, float(path.length))
 
 
 def _plan_digest(text: str) -> str:

@@ -26,6 +26,7 @@ from racing_lib.vehicle.forces import (
     ops_for,
     pacejka_lateral,
     rolling_resistance,
+    slip_angles,
     static_axle_loads,
     wheel_loads,
 )
@@ -49,6 +50,7 @@ __all__ = [
     "ops_for",
     "pacejka_lateral",
     "rolling_resistance",
+    "slip_angles",
     "static_axle_loads",
     "wheel_loads",
 ]

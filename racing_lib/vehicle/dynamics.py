@@ -15,6 +15,8 @@ from typing import Any
 
 from racing_lib.vehicle.forces import (
     MATH_OPS,
+    drag_force,
+    slip_angles,
     wheel_loads,
 )
 from racing_lib.vehicle.params import VehicleParams
@@ -129,7 +131,7 @@ def car_vector_field(
         frame, m/s^2: the load-transfer input for the next substep.
     """
     psi, vx, vy, r, delta = state[_PSI], state[_VX], state[_VY], state[_R], state[_DELTA]
-    sin, cos, atan, fmin, fmax = ops.sin, ops.cos, ops.atan, ops.fmin, ops.fmax
+    sin, cos, fmin, fmax = ops.sin, ops.cos, ops.fmin, ops.fmax
     m = p.m
     sd, cd = sin(delta), cos(delta)
 
@@ -139,8 +141,7 @@ def car_vector_field(
     # Slip angles; the speed in the denominator is clamped so the dynamics stay bounded near
     # standstill (the car is not meant to reverse).
     vx_s = fmax(ops.fabs(vx), p.v_min_slip)
-    alpha_f = delta - atan((vy + p.l_f * r) / vx_s)
-    alpha_r = -atan((vy - p.l_r * r) / vx_s)
+    alpha_f, alpha_r = slip_angles(vx_s, vy, r, delta, p.l_f, p.l_r, ops, small_angle=False)
 
     # Smooth sign of the motion: brakes and rolling resistance fade out at standstill.
     sgn = ops.tanh(vx / p.v_smooth)
@@ -181,7 +182,7 @@ def car_vector_field(
         - p.l_r * (fy_rl + fy_rr)
         + half_t * (fxb_fr - fxb_fl + fx_rr - fx_rl)  # left wheels sit at y = +l_t/2
     )
-    drag = p.C_xw * vx * ops.fabs(vx)
+    drag = drag_force(vx, p.C_xw, ops)
 
     d_vx = (f_x - drag) / m - p.g * sin(theta) + r * vy
     d_vy = f_y / m - r * vx

@@ -33,6 +33,7 @@ __all__ = [
     "ops_for",
     "pacejka_lateral",
     "rolling_resistance",
+    "slip_angles",
     "static_axle_loads",
     "wheel_loads",
 ]
@@ -119,10 +120,28 @@ def axle_cornering_stiffness(F_z: float, mu: float, B: float, C: float, D: float
     return mu * F_z * D * B * C
 
 
-def drag_force(v_x: Any, C_xw: float) -> Any:
-    """Aerodynamic drag F_xw = C_xw v_x^2 (paper Eq. 7), N, acting against the motion."""
-    ops = ops_for(v_x)
+def drag_force(v_x: Any, C_xw: float, ops: Any = None) -> Any:
+    """Aerodynamic drag F_xw = C_xw v_x^2 (paper Eq. 7), N, acting against the motion.
+
+    ``ops`` is the math backend (default: picked from ``v_x``, see :func:`ops_for`).
+    """
+    ops = ops_for(v_x) if ops is None else ops
     return C_xw * v_x * ops.fabs(v_x)
+
+
+def slip_angles(
+    v_x: Any, v_y: Any, r: Any, delta: Any, l_f: float, l_r: float, ops: Any, small_angle: bool
+) -> tuple[Any, Any]:
+    """Front and rear slip angles (paper Eq. 11), rad.
+
+    ``alpha_f = delta - atan((v_y + l_f r) / v_x)`` and ``alpha_r = -atan((v_y - l_r r) / v_x)``;
+    with ``small_angle`` the arctangents are dropped, as in the planning model. ``v_x`` (m/s) is
+    used as given: guard or clamp it away from zero first. ``v_y`` in m/s, ``r`` in rad/s,
+    ``delta`` in rad, ``l_f`` and ``l_r`` in m; ``ops`` is the math backend (:func:`ops_for`).
+    """
+    if small_angle:
+        return delta - (v_y + l_f * r) / v_x, -(v_y - l_r * r) / v_x
+    return delta - ops.atan((v_y + l_f * r) / v_x), -ops.atan((v_y - l_r * r) / v_x)
 
 
 def rolling_resistance(F_z: Any, c_rr: float) -> Any:

@@ -13,6 +13,10 @@ from racing_lib.control.mpc.qp_problem import (
 )
 from racing_lib.errors import ControlError
 from racing_lib.model import X
+from racing_lib.vehicle.params import VehicleParams
+
+#: The car whose data sheet gives the defaults of the car's dimensions and actuator.
+_CAR = VehicleParams()
 
 __all__ = ["COUPLED_STATES", "LATERAL_STATES", "MX", "MPCSettings"]
 
@@ -155,10 +159,11 @@ class MPCSettings:
     slack_linear: float = 100.0
     slack_quadratic: float = 1000.0
     margin: float = 0.3
-    car_width: float = 2.008
-    steer_max: float = 0.5
-    steer_rate_max: float = 1.2
-    steer_tau: float = 0.08
+    # The car's dimensions and actuator: by default the simulated car's data sheet.
+    car_width: float = _CAR.width
+    steer_max: float = _CAR.steer_max
+    steer_rate_max: float = _CAR.steer_rate_max
+    steer_tau: float = _CAR.steer_tau
     smooth_transition: bool = True
     throttle_scale: float = 1.0
     brake_scale: float = 1.0
