@@ -8,12 +8,12 @@ Usage (from the repository root)::
 A template and its solution differ only in the body of the functions the reader writes, so both
 are generated from the same cells here and cannot drift apart (``tests/test_exercises.py`` checks
 that the committed notebooks are what this script writes). The checks themselves live in the
-package, ``racing_lib.exercises.chNN``; they compare the reader's function with the library.
+package, ``racing_lib.grading.chNN``; they compare the reader's function with the library.
 Check cells carry ``# NBVAL_CHECK_OUTPUT``: nbval then verifies that every template still says
 "not done yet" and every solution says "correct".
 
 Adding an exercise: add an entry to a chapter's ``exercises`` list below (markdown, the template
-body, the solution body, the check call), write its check in ``racing_lib/exercises/chNN.py``
+body, the solution body, the check call), write its check in ``racing_lib/grading/chNN.py``
 with a test of a plausible wrong answer in ``tests/test_exercises.py``, then run the two commands
 above.
 """
@@ -76,7 +76,7 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 
 import racing_lib.face.notebook
-from racing_lib.exercises.ch01 import (
+from racing_lib.grading.ch01 import (
     check_frenet_projection,
     check_frenet_rates,
     check_frenet_to_cartesian,
@@ -182,7 +182,7 @@ Parameters come as a `racing_lib.model.ModelParams` `p`: `p.m` (kg), `p.l_f`, `p
 import numpy as np
 
 import racing_lib.face.notebook
-from racing_lib.exercises.ch02 import (
+from racing_lib.grading.ch02 import (
     check_axle_loads,
     check_slip_angles,
     check_spatial_dynamics,
@@ -288,7 +288,7 @@ The checks compare with `racing_lib.planning` on the expressway.""",
 import numpy as np
 
 import racing_lib.face.notebook
-from racing_lib.exercises.ch03 import (
+from racing_lib.grading.ch03 import (
     check_cornering_speed,
     check_lap_time,
     check_steady_cornering,
@@ -371,7 +371,7 @@ their force peak. The checks compare with `racing_lib.planning.time_optimal` and
 import numpy as np
 
 import racing_lib.face.notebook
-from racing_lib.exercises.ch04 import check_peak_slip_angle, check_spatial_lap_time""",
+from racing_lib.grading.ch04 import check_peak_slip_angle, check_spatial_lap_time""",
     exercises=[
         Exercise(
             markdown="""## Exercise 4.1 · Lap time in the spatial domain
@@ -423,7 +423,7 @@ acceleration to a pedal position. The checks compare with `racing_lib.control.mp
 import numpy as np
 
 import racing_lib.face.notebook
-from racing_lib.exercises.ch05 import (
+from racing_lib.grading.ch05 import (
     check_heuristic_trajectory,
     check_pedal_inversion,
     check_steering_lag,
@@ -493,12 +493,12 @@ CH06 = Chapter(
     intro="""Chapter 06 tunes the MPC's weights with CMA-ES, which only needs a score per closed-loop
 lap. Here you write that score, the paper's tuning objective, and the map from CMA-ES's search
 space (logarithms of the weights) to the weights themselves. The checks compare with
-`racing_lib.experiments.tuning` on laps made up for the exercise (`racing_lib.exercises.ch06.synthetic_lap`), so
+`racing_lib.experiments.tuning` on laps made up for the exercise (`racing_lib.grading.ch06.synthetic_lap`), so
 no simulation is needed.""",
     imports="""import numpy as np
 
 import racing_lib.face.notebook
-from racing_lib.exercises.ch06 import check_search_space, check_tuning_objective, synthetic_lap""",
+from racing_lib.grading.ch06 import check_search_space, check_tuning_objective, synthetic_lap""",
     exercises=[
         Exercise(
             markdown="""## Exercise 6.1 · The tuning objective

@@ -6,11 +6,11 @@ identification and the paper's ablations mean something:
 * inputs at 10 Hz: a steering command (angle- and rate-limited, first-order actuator lag) and one
   pedal u_p in [-1, 1] (throttle >= 0, brake < 0); outputs only spatial states (`Observation`);
 * a double-track chassis: four wheel loads with longitudinal and lateral load transfer, Pacejka
-  lateral forces with tire load sensitivity and combined slip (friction ellipse), aerodynamic drag,
+  lateral forces with tyre load sensitivity and combined slip (friction ellipse), aerodynamic drag,
   rolling resistance and road grade from the track's elevation;
 * a nonlinear rear-wheel-drive powertrain (engine torque curve, power limit, six gears with
   automatic shifting and a torque cut while shifting) and brakes with a front/rear split, every
-  longitudinal tire force limited by the tire's friction;
+  longitudinal tyre force limited by the tyre's friction;
 * walls on walled tracks (contact stops the motion into the wall, costs speed, and is counted with
   its duration); on open tracks the wheels beyond the edge lose grip;
 * fixed-step RK4 inside each control step; seeded per-trial randomness (actuation noise and a small
@@ -71,7 +71,7 @@ class SimulatedCar:
         Initial forward speed (flying start), m/s.
     substep : float
         Nominal RK4 step, s; dt is split into equal substeps no longer than this. At low speed the
-        substep shrinks further (the tire dynamics stiffen like 1/v_x), so RK4 stays stable.
+        substep shrinks further (the tyre dynamics stiffen like 1/v_x), so RK4 stays stable.
 
     Attributes
     ----------
@@ -109,7 +109,7 @@ class SimulatedCar:
         self.start_s = float(start_s)
         self.start_speed = float(start_speed)
         self._n_base = max(1, math.ceil(self.dt / substep - 1e-9))
-        # Stiffest tire mode ~ (sum of cornering stiffnesses) (1/m + l^2/I) / v_x; RK4 is stable
+        # Stiffest tyre mode ~ (sum of cornering stiffnesses) (1/m + l^2/I) / v_x; RK4 is stable
         # for |lambda h| < 2.8, we keep it below 2.
         f_zf, f_zr = static_axle_loads(p.m, p.l_f, p.l_r, p.g)
         c_sum = axle_cornering_stiffness(f_zf, p.mu, p.B_f, p.C_f, p.D_f)
@@ -236,7 +236,7 @@ class SimulatedCar:
             self._raise_nonfinite(self._state)
         speed = abs(self._state[SimState.VX])
         n_sub = self._n_base
-        # Shrink the substep at low speed, where the tire modes get stiff (see __init__).
+        # Shrink the substep at low speed, where the tyre modes get stiff (see __init__).
         n_low = math.ceil(self.dt * self._stiffness / max(speed, p.v_min_slip) / 2.0)
         if n_low > n_sub:
             n_sub = min(n_low, 200)

@@ -18,7 +18,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from racing_lib.exercises import ch01, ch02, ch03, ch04, ch05, ch06, grader
+from racing_lib.grading import (
+    ch01,
+    ch02,
+    ch03,
+    ch04,
+    ch05,
+    ch06,
+    grader,
+)
 
 REPO = Path(__file__).resolve().parents[1]
 EXERCISES = REPO / "exercises"

@@ -116,7 +116,7 @@ def _steady_radius(delta: float, v: float) -> tuple[float, float, SimulatedCar]:
 
 
 def _understeer_gradient() -> float:
-    """K_us = m / L (l_r / C_af - l_f / C_ar), rad / (m/s^2), from the tire parameters."""
+    """K_us = m / L (l_r / C_af - l_f / C_ar), rad / (m/s^2), from the tyre parameters."""
     f_zf, f_zr = static_axle_loads(P.m, P.l_f, P.l_r, P.g)
 
     def axle(f_z_axle: float, b: float, c: float, d: float) -> float:

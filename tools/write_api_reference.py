@@ -45,7 +45,7 @@ SECTIONS = [
         "Plots, notebooks and the command line",
         ["racing_lib.face", "racing_lib.face.plotting", "racing_lib.face.notebook"],
     ),
-    ("Exercise checks", ["racing_lib.exercises"]),
+    ("Exercise checks", ["racing_lib.grading"]),
     (
         "Settings, errors, files and provenance",
         [

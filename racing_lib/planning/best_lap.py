@@ -24,7 +24,7 @@ Nominal friction on all four wheels (no per-trial randomness), no walls (the e_y
 off them), an ideal gearbox (no torque cut while shifting): so the lap is a slightly optimistic
 bound on what the simulated car can do.
 
-What made it converge (a 460 m oval, 4 m grid): the vector field's clamps (tire force limits,
+What made it converge (a 460 m oval, 4 m grid): the vector field's clamps (tyre force limits,
 traction control, steering rate) are kinks, and with them exact IPOPT cycled without converging
 (300-1000 iterations). Now (1) the commands are kept inside the limits of the more loaded wheel
 of each axle and inside the steering rate limit (``force_margin``, ``rate_margin``); (2) the
@@ -32,7 +32,7 @@ remaining clamps, which bind on the lighter inner wheel in corners (both wheels 
 same command), are rounded off over 1 % of their arguments (``smoothing``): 142 iterations. Keeping
 the inner wheels inside their limits as well converged faster (51 iterations) but to a slower,
 wrong answer (5 % below the car's cornering speed on a circle). (3) The slip angles are bounded
-near the tire peak, as in the planning NLP. (4) Drive and brake exclude each other (one pedal) by
+near the tyre peak, as in the planning NLP. (4) Drive and brake exclude each other (one pedal) by
 a relaxed complementarity constraint (``pedal_overlap``).
 """
 
@@ -118,7 +118,7 @@ def _wheel_limits(p: VehicleParams, fz: Any, front: bool, alpha: Any, ops: Any) 
 def _smooth_ops(rel: float) -> Any:
     """CasADi backend whose min/max are rounded off over ``rel`` of the arguments' size.
 
-    The vector field's clamps (a tire at its limit on the lighter wheel of an axle) are kinks;
+    The vector field's clamps (a tyre at its limit on the lighter wheel of an axle) are kinks;
     Newton steps jump across them and IPOPT cycles. The rounded max overestimates by at most
     ``rel / sqrt(2)`` of the arguments where they are equal, and nothing away from there.
     """
@@ -176,12 +176,12 @@ class BestLapSettings:
         Bound on |alpha_f|, |alpha_r| as a multiple of each axle's Pacejka peak slip at the static
         load (the loaded outer wheels peak later, hence a default above 1); None: no bound.
     force_margin : float
-        Wheel force commands are kept below this share of the tire's limits (peak force, traction
+        Wheel force commands are kept below this share of the tyre's limits (peak force, traction
         control), so that the vector field's force clamps, which are kinks, stay inactive, -.
     rate_margin : float
         Same for the steering actuator's rate limit, -.
     smoothing : float
-        Relative width over which the vector field's min/max (tire clamps) are rounded off in the
+        Relative width over which the vector field's min/max (tyre clamps) are rounded off in the
         NLP (`_smooth_ops`), -; 0 keeps them exact (IPOPT then cycles on laps with corners).
     pedal_overlap : float or None
         The simulated car has one pedal, so drive and brake force exclude each other; imposed as
@@ -233,7 +233,7 @@ class BestLapResult:
         Lap time of the solution, s.
     trajectory : Trajectory or None
         The lap (method ``'best-lap'``); ``delta`` is the actual steering angle, ``ax`` the
-        ground-force acceleration (drive, brake, rolling resistance, tire forces along the body).
+        ground-force acceleration (drive, brake, rolling resistance, tyre forces along the body).
     start : str
         ``'warm'`` (planning-model time-optimal lap), ``'cold'`` or ``'given'``.
     grid : TrackGrid
@@ -304,7 +304,7 @@ def _node_function(p: VehicleParams, st: BestLapSettings) -> tuple[Any, list[flo
     ]
     lb = [0.0, 0.0, -np.inf, -1.0]
     ub = [0.0, 0.0, 0.0, 1.0]
-    # Keep the wheel force commands inside the tire clamps of the more loaded wheel of each axle
+    # Keep the wheel force commands inside the tyre clamps of the more loaded wheel of each axle
     # (kinks there make IPOPT cycle): brake per front wheel <= f_peak, rear drive <= the
     # traction-control limit. Both wheels of an axle get the same command, so the clamp of the
     # lighter (inner) wheel is a legitimate operating point and stays in the dynamics.
@@ -408,7 +408,7 @@ def _guess_from_plan(grid: TrackGrid, p: VehicleParams, res: TimeOptimalResult) 
     z[V.EPSI], z[V.EY] = get("epsi"), get("ey")
     z[V.DELTA] = z[V.DCMD] = get("delta")
     a_x = get("ax")
-    # The plan's a_x is the tire acceleration: drive force beyond it covers drag and rolling.
+    # The plan's a_x is the tyre acceleration: drive force beyond it covers drag and rolling.
     resist = p.C_xw * z[V.VX] ** 2 + p.c_rr * p.m * p.g
     z[V.FD] = np.maximum(p.m * a_x + resist, 0.0)
     z[V.FB] = np.clip(-p.m * a_x, 0.0, p.brake_force_max)

@@ -36,11 +36,11 @@ taken literally in SI units did not (see MEASURED.md):
   98.6 s on the expressway and 72.0 s on Norisring, w_1 = 0.3 gave 99.8 s and 72.1 s.
 * **v_x prescribed at a fraction of the speed profile.** v_x is not a decision variable: it is
   fixed to v_hat = ``speed_fraction`` (0.9) times the speed profile of the current line. Near
-  100 % the tires sit at the peak of their force curve in every corner, where the linearized
+  100 % the tyres sit at the peak of their force curve in every corner, where the linearized
   lateral dynamics lose their cornering stiffness: with 1.0 the first QP on the expressway failed
   in Clarabel and Norisring ended 0.7 s slower. The final line is driven at its full profile.
 * **Linearization at steady cornering** (:func:`steady_cornering`), not at the kinematic guess
-  (v_y = 0, delta = L kappa): the kinematic guess puts hairpins past the tire peak, where the
+  (v_y = 0, delta = L kappa): the kinematic guess puts hairpins past the tyre peak, where the
   linearized dynamics are unstable (an eigenvalue of +35 per metre on Norisring) and the QP
   infeasible.
 * **Trapezoidal discretization** of the linearized dynamics: an explicit RK4 step of 3-5 m is
@@ -322,7 +322,7 @@ def steady_cornering(
     """Lateral velocity, yaw rate and steering of steady cornering at speed v on curvature kappa.
 
     Each axle carries its static share of the lateral acceleration v^2 kappa; the slip angle that
-    gives it is found by inverting the simplified Pacejka curve (tire force proportional to load),
+    gives it is found by inverting the simplified Pacejka curve (tyre force proportional to load),
     then v_y and delta follow from the slip-angle definitions of the model. Used as the
     linearization point of the QP and as the initial guess of the NLP; not a model of its own.
 
@@ -335,7 +335,7 @@ def steady_cornering(
     params : ModelParams
         Mass geometry and Pacejka factors.
     max_use : float
-        Friction use is capped at this fraction of the tire peak (beyond it there is no solution).
+        Friction use is capped at this fraction of the tyre peak (beyond it there is no solution).
 
     Returns
     -------
@@ -556,7 +556,7 @@ def solve_curvature(
         # taking the new profile whole makes the line swing by a few decimetres forever.
         v_hat = v_new if v_hat_prev is None else v_hat_prev + st.relaxation * (v_new - v_hat_prev)
         v_hat_prev = v_hat
-        # Linearize at steady cornering on the current line at v_hat: with the tires on the
+        # Linearize at steady cornering on the current line at v_hat: with the tyres on the
         # stable side of their peak the linearized lateral dynamics are stable.
         v_y, r_bar, delta_bar = steady_cornering(v_hat, kappa_line, params)
         # Longitudinal input that makes v_x follow v_hat between nodes (v dv/ds).

@@ -2,10 +2,10 @@
 
 Given the curvature kappa(s) of a line, the fastest speed a car can hold is limited in three ways:
 
-1. in a corner the tires must supply the lateral acceleration v^2 kappa, so
+1. in a corner the tyres must supply the lateral acceleration v^2 kappa, so
    ``v <= v_max(s) = sqrt(mu (g cos theta + a_z) / |kappa|)`` (paper, Eq. MaxV), capped at a top
    speed;
-2. when speeding up, the tire acceleration a_x is limited by the powertrain (the pedal map at full
+2. when speeding up, the tyre acceleration a_x is limited by the powertrain (the pedal map at full
    throttle) and by what the friction ellipse leaves after cornering,
    ``a_x <= mu g sqrt(1 - (v^2 kappa / (mu g))^2)``; drag, rolling resistance and grade are
    subtracted from it;
@@ -170,8 +170,8 @@ def speed_profile(
         object with these names serves (the simulated car's ``VehicleParams`` does); a missing
         value, or no parameters at all, takes the default of ``ModelParams()``.
     pedal_map : PedalMap or callable, optional
-        Tire acceleration limits a_x in [a_min(v), a_max(v)], m/s^2 (see
-        :func:`pedal_accel_limits`); default ``params.pedal``. Without any, the tires' friction
+        Tyre acceleration limits a_x in [a_min(v), a_max(v)], m/s^2 (see
+        :func:`pedal_accel_limits`); default ``params.pedal``. Without any, the tyres' friction
         mu g is the only limit.
     theta : array_like, shape (N,), optional
         Road grade, rad, positive uphill; it reduces the vertical load (cos) and adds g sin(theta)
@@ -269,7 +269,7 @@ def speed_profile(
         return c_xw * v * v / mass + c_rr * g_eff[k] + G * math.sin(theta[k])
 
     def ellipse(v: float, k: int) -> float:
-        # What the friction circle leaves for longitudinal tire acceleration at speed v.
+        # What the friction circle leaves for longitudinal tyre acceleration at speed v.
         lat = v * v * abs_k[k] / grip[k]
         return grip[k] * math.sqrt(max(0.0, 1.0 - lat * lat))
 
@@ -289,16 +289,16 @@ def speed_profile(
         return values[i] + (x - i) * (values[i + 1] - values[i])
 
     def acc_max(v: float, k: int) -> float:
-        a_tire = ellipse(v, k)
+        a_tyre = ellipse(v, k)
         if limits is not None:
-            a_tire = min(a_tire, table(hi_list, v))
-        return a_tire - resist(v, k)
+            a_tyre = min(a_tyre, table(hi_list, v))
+        return a_tyre - resist(v, k)
 
     def dec_max(v: float, k: int) -> float:
-        a_tire = ellipse(v, k)
+        a_tyre = ellipse(v, k)
         if limits is not None:
-            a_tire = min(a_tire, -table(lo_list, v))
-        return a_tire + resist(v, k)
+            a_tyre = min(a_tyre, -table(lo_list, v))
+        return a_tyre + resist(v, k)
 
     v_max_list = v_max.tolist()
     ds_list = ds.tolist()

@@ -14,9 +14,9 @@ Formulation choices, from the measurements in MEASURED.md:
   grid a cold start (centerline, 10 m/s) converged in 26-41 IPOPT iterations on the two built-in
   tracks and four real circuits, a warm start from the curvature QP in 75-134, to the same lap
   time (within 0.002 s); probably because the warm start sits on many active constraints (track
-  edges, tire peaks), where an interior-point method starts badly (a lower ``mu_init`` did not
+  edges, tyre peaks), where an interior-point method starts badly (a lower ``mu_init`` did not
   help).
-* **Tires below their peak**: |alpha_f|, |alpha_r| <= the slip angle where the Pacejka force
+* **Tyres below their peak**: |alpha_f|, |alpha_r| <= the slip angle where the Pacejka force
   reaches 95 % of its peak (``slip_force_share``,
   :meth:`racing_lib.model.ModelParams.slip_angle_at`). Past the peak the optimum is degenerate
   and IPOPT needs several times more iterations; up to the peak itself, plans drifted into
@@ -24,12 +24,12 @@ Formulation choices, from the measurements in MEASURED.md:
 * **Everything scaled to order one**: each variable is divided by a typical magnitude and each
   dynamics defect by the scale of its state; the objective by a reference lap time.
 * **Exact Hessian** (CasADi's algorithmic differentiation of an SX graph).
-* **Combined slip**: the tires' longitudinal acceleration ``a_x - F_yf sin(delta) / m`` and the
+* **Combined slip**: the tyres' longitudinal acceleration ``a_x - F_yf sin(delta) / m`` and the
   lateral acceleration a_y share the friction ellipse ``(a_long / a_brake)^2 + (a_y / a_peak)^2
   <= 1`` (``friction_ellipse``; ``a_peak`` is the
   tyres' peak, :meth:`racing_lib.model.ModelParams.peak_acceleration`, ``a_brake`` the pedal
-  map's full brake, both identified: the g-g diagram); the model's lateral tire forces do not know
-  about braking, the simulated car's tires do. The rear tyres also carry the drive force inside
+  map's full brake, both identified: the g-g diagram); the model's lateral tyre forces do not know
+  about braking, the simulated car's tyres do. The rear tyres also carry the drive force inside
   their own friction circle (``drive_axle_circle``).
 * **State-dependent a_x limits** (paper, Appendix C): a_x between the pedal map's value at full
   brake and at full throttle. Our pedal map is affine in the state apart from its power limit, so

@@ -99,7 +99,7 @@ class Trajectory:
     r : ndarray, shape (N,)
         Yaw rate, rad/s.
     ax : ndarray, shape (N,)
-        Longitudinal tire acceleration input a_x, m/s^2.
+        Longitudinal tyre acceleration input a_x, m/s^2.
     delta : ndarray, shape (N,)
         Steering angle, rad.
     t : ndarray, shape (N,)

@@ -109,13 +109,13 @@ def car_vector_field(
     state : sequence of 7
         [x, y, psi, v_x, v_y, r, delta] (see `SimState`), m, m, rad, m/s, m/s, rad/s, rad.
     delta_cmd : steering command after the angle limit, rad.
-    f_drive : total drive force the powertrain delivers to the rear wheels (before the tire
+    f_drive : total drive force the powertrain delivers to the rear wheels (before the tyre
         limit), N, >= 0.
-    f_brake : total brake force (before the split and the tire limit), N, >= 0.
+    f_brake : total brake force (before the split and the tyre limit), N, >= 0.
     theta : road pitch, rad (positive uphill).
     mu_wheels : friction coefficients of the wheels (FL, FR, RL, RR), -.
     a_transfer : (a_x, a_y), the accelerations that set the load transfer, m/s^2. The wheel loads
-        depend on the tire forces, which depend on the loads (an algebraic loop). The simulator
+        depend on the tyre forces, which depend on the loads (an algebraic loop). The simulator
         closes it quasi-statically with the ground-force accelerations of the previous substep
         (returned here as the second output); a planner can make them decision variables with the
         constraint a_transfer == returned accelerations.
@@ -127,7 +127,7 @@ def car_vector_field(
     d_state : tuple of 7
         Time derivative of the state.
     a_ground : (a_x, a_y)
-        Accelerations of the ground forces on the tires (drive, brake, rolling, lateral), body
+        Accelerations of the ground forces on the tyres (drive, brake, rolling, lateral), body
         frame, m/s^2: the load-transfer input for the next substep.
     """
     psi, vx, vy, r, delta = state[_PSI], state[_VX], state[_VY], state[_R], state[_DELTA]

@@ -109,7 +109,7 @@ def pacejka_lateral(alpha: Any, F_z: Any, mu: Any, B: Any, C: Any, D: Any) -> An
 
     Returns
     -------
-    Lateral tire force, N (same type as the inputs).
+    Lateral tyre force, N (same type as the inputs).
     """
     ops = ops_for(alpha, F_z, mu, B, C, D)
     return mu * F_z * D * ops.sin(C * ops.atan(B * alpha))
@@ -296,7 +296,7 @@ def drive_force_envelope(p: VehicleParams, v_x: Any, ops: Any = None) -> Any:
     """Largest full-throttle drive force over all gears at speed v_x, N (any backend).
 
     The smooth-ish envelope of the gearbox (max over gears), for planners that treat the gear choice
-    as ideal. Tire friction is not included.
+    as ideal. Tyre friction is not included.
     """
     ops = ops or ops_for(v_x)
     best = None

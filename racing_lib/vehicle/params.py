@@ -44,7 +44,7 @@ class VehicleParams:
     h_c : float
         Height of the centre of gravity, m (load transfer). Paper.
     mu : float
-        Tire-road friction coefficient on the track surface, -. Paper.
+        Tyre-road friction coefficient on the track surface, -. Paper.
     C_xw : float
         Aerodynamic drag coefficient in F = C_xw v_x^2, kg/m. Paper.
     I_zz : float
@@ -59,17 +59,17 @@ class VehicleParams:
     overhang_rear : float
         Body length behind the rear axle, m.
     B_f, C_f, D_f : float
-        Simplified Pacejka stiffness, shape and peak factors, front tires, -. B 10, C 1.9, D 1 are
-        common racing-tire values (peak at about 0.11 rad slip).
+        Simplified Pacejka stiffness, shape and peak factors, front tyres, -. B 10, C 1.9, D 1 are
+        common racing-tyre values (peak at about 0.11 rad slip).
     B_r, C_r, D_r : float
-        Same for the rear tires; B_r > B_f (stiffer per unit load) makes the car mildly understeer.
+        Same for the rear tyres; B_r > B_f (stiffer per unit load) makes the car mildly understeer.
     load_sensitivity : float
         Drop of the peak factor per unit of relative load increase, -: a wheel with load F_z has
         D (1 - k (F_z - F_z0) / F_z0), F_z0 = m g / 4. It is what makes lateral load transfer cost
-        grip; real tires have 0.1-0.2.
+        grip; real tyres have 0.1-0.2.
     stiffness_load_exponent : float
-        Exponent q of the tire stiffness's load dependence, -: a wheel with load F_z uses
-        B (F_z,static / F_z)^q, so its cornering stiffness grows like F_z^(1 - q) (real tires:
+        Exponent q of the tyre stiffness's load dependence, -: a wheel with load F_z uses
+        B (F_z,static / F_z)^q, so its cornering stiffness grows like F_z^(1 - q) (real tyres:
         sublinear). B_f, B_r are the values at the static loads. Without it (q = 0) the high CoG
         makes the car spin under moderate braking in corners.
     min_lateral_share : float
@@ -86,9 +86,9 @@ class VehicleParams:
         wheel brakes up to its peak and keeps only min_lateral_share); then a hard stop on a
         gentle curve locks the lightly loaded rear and spins the car.
     c_rr : float
-        Rolling resistance coefficient, - (R_x = c_rr F_z; road tires 0.010-0.015).
+        Rolling resistance coefficient, - (R_x = c_rr F_z; road tyres 0.010-0.015).
     r_w : float
-        Loaded wheel radius, m (185/60 R16 tire).
+        Loaded wheel radius, m (185/60 R16 tyre).
     engine_rpm : tuple of float
         Engine speed grid of the full-load torque curve, rpm, increasing.
     engine_torque_max : tuple of float
@@ -112,8 +112,8 @@ class VehicleParams:
     shift_time : float
         Drive torque is cut for this long during a shift, s.
     brake_force_max : float
-        Total brake force at full pedal before the tire limit, N (about 1.2 m g, so that a full
-        brake is tire-limited at the front).
+        Total brake force at full pedal before the tyre limit, N (about 1.2 m g, so that a full
+        brake is tyre-limited at the front).
     brake_front_share : float
         Share of the brake force on the front axle, -.
     steer_max : float
@@ -161,7 +161,7 @@ class VehicleParams:
     l_t: float = 1.48
     overhang_front: float = 0.83
     overhang_rear: float = 0.66
-    # --- tires ---
+    # --- tyres ---
     B_f: float = 8.0
     C_f: float = 1.9
     D_f: float = 1.0
@@ -243,5 +243,5 @@ class VehicleParams:
 
     @property
     def F_z0(self) -> float:
-        """Nominal wheel load m g / 4, N (reference of the tire load sensitivity)."""
+        """Nominal wheel load m g / 4, N (reference of the tyre load sensitivity)."""
         return self.m * self.g / 4.0

@@ -129,8 +129,8 @@ class CoupledMPC(MPCBase):
         xi_ref, u_ref, rows = self.reference(xi0[X.S])
         xi_hat = self.heuristic_trajectory(xi0, xi_ref)
         # The same transition for the inputs, from the last command to the plan's: linearizing
-        # at the plan's steering while the front tires are working at a very different angle
-        # gets the sign of the tire-force slope wrong when the car is near the grip limit.
+        # at the plan's steering while the front tyres are working at a very different angle
+        # gets the sign of the tyre-force slope wrong when the car is near the grip limit.
         u_hat = u_ref + self._lam_used[:, None] * (self._u_prev - u_ref[0])[None, :]
         kappa = rows[:N, PlanTable.KAPPA]
         theta = rows[:N, PlanTable.THETA]

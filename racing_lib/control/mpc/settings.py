@@ -108,7 +108,7 @@ class MPCSettings:
         ``|a_x| <= a_brake sqrt(1 - (a_y / a_peak)^2)`` with ``a_y = v_x r`` of the heuristic
         trajectory, ``a_peak = friction_scale mu D g`` (``D`` the smaller Pacejka peak factor)
         and ``a_brake`` the pedal map's full brake (scaled alike, at most ``a_peak``). The
-        model's tires do not know that braking costs lateral grip; the car's do, and a
+        model's tyres do not know that braking costs lateral grip; the car's do, and a
         controller that brakes fully into a hairpin (as the plan may ask when the car arrives
         too fast) understeers into the wall.
         This is the planner's friction ellipse, made a state-dependent input bound like the
@@ -117,7 +117,7 @@ class MPCSettings:
         Fraction of the model's peak friction the ellipse allows (dimensionless).
     ax_min_floor : float
         Lower bound on a_x in any case, m/s^2 (-inf: the pedal map alone decides). The linear
-        pedal map keeps promising more deceleration at full brake than the tires give: on the
+        pedal map keeps promising more deceleration at full brake than the tyres give: on the
         simulated car full brake gave about -11 m/s^2 at 30-50 m/s where the identified map
         says -12 to -12.3. Unlike ``brake_scale`` this leaves partial braking as mapped.
     brake_pedal : float
@@ -134,7 +134,7 @@ class MPCSettings:
         exponential of model.py's Jacobians); stable at any speed, but only an O(dt^2)
         approximation of the nonlinear step away from equilibria.
     substeps : int
-        RK4 steps per period for ``"rk4"``. One RK4 step of 0.1 s is unstable for the tire modes
+        RK4 steps per period for ``"rk4"``. One RK4 step of 0.1 s is unstable for the tyre modes
         below about 8 m/s (|lambda dt| > 2.8), which turns a slow car's QP into nonsense; 2 steps
         keep it stable down to about 4 m/s, 4 steps to about 2 m/s.
     jit : bool

@@ -11,7 +11,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from racing_lib.exercises.grader import CheckResult, Wrong, as_float, call, differs, grade
+from racing_lib.grading.grader import (
+    CheckResult,
+    Wrong,
+    as_float,
+    call,
+    differs,
+    grade,
+)
 
 __all__ = ["check_search_space", "check_tuning_objective", "synthetic_lap"]
 

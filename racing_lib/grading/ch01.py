@@ -15,7 +15,7 @@ import math
 
 import numpy as np
 
-from racing_lib.exercises.grader import (
+from racing_lib.grading.grader import (
     CheckResult,
     Wrong,
     as_float,

@@ -10,7 +10,7 @@ template) is reported as "not done yet", never as an error. A function that cras
 with the exception and the case that triggered it. Each check has a weight (for a score) and a
 time limit (a reader's endless loop should not hang the notebook).
 
-Writing a check (see :mod:`racing_lib.exercises.ch01` for examples)::
+Writing a check (see :mod:`racing_lib.grading.ch01` for examples)::
 
     def check_braking_distance(braking_distance):
         def body():
