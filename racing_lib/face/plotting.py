@@ -226,3 +226,43 @@ def plot_profiles(
     ax.set_ylabel(ylabel)
     ax.legend(loc="best", fontsize=8)
     return ax
+
+
+def plot_row_speeds(
+    ax: Any,
+    row: dict[str, Any],
+    title: str,
+    base: dict[str, Any] | None = None,
+    corners: dict[int, float] | None = None,
+) -> Any:
+    """v_x over s of one ablation row: its plan and its closed loop, the base row's plan in grey.
+
+    Parameters
+    ----------
+    ax : matplotlib Axes
+        Where to draw.
+    row, base : dict
+        Rows of the ablation table (their ``profile``); ``base`` is drawn as a grey reference.
+    title : str
+        Title of the panel.
+    corners : dict, optional
+        Corner number -> arc length, m, marked along the axis.
+    """
+    from racing_lib.experiments.ablation.paper import row_profile
+
+    s = np.asarray(row["profile"]["s_m"], dtype=float)
+    if base is not None:
+        ax.plot(s, row_profile(base, "plan", "vx_mps"), color="0.6", lw=0.9, label="main plan")
+    plot_profiles(
+        s,
+        {
+            "plan": row_profile(row, "plan", "vx_mps"),
+            "closed loop": row_profile(row, "closed_loop", "vx_mps"),
+        },
+        ax=ax,
+        ylabel="v_x [m/s]",
+        corners=corners,
+    )
+    ax.set_title(title, fontsize=10, pad=14)
+    ax.set_xlabel("")
+    return ax
