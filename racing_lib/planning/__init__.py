@@ -21,7 +21,7 @@ import time
 import warnings
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from racing_lib.errors import PlanningError, checked_arguments
 from racing_lib.planning.curvature import (
@@ -37,6 +37,9 @@ from racing_lib.planning.time_optimal import (
     solve_time_optimal,
 )
 from racing_lib.planning.trajectory import Trajectory
+
+if TYPE_CHECKING:
+    from racing_lib.model.params import ModelParams
 
 METHODS = ("centerline", "curvature", "time-optimal")
 
@@ -128,7 +131,7 @@ def _warn_if_large(track: Any, method: str, spacing: float, say: Callable[[str],
 def plan(
     track: Any,
     method: str = "time-optimal",
-    params: Any = None,
+    params: ModelParams | None = None,
     options: Any = None,
     *,
     spacing: float = 3.0,

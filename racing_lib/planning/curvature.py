@@ -66,7 +66,7 @@ import math
 import time
 from dataclasses import dataclass, field
 from enum import IntEnum
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import scipy.sparse as sp
@@ -74,6 +74,9 @@ import scipy.sparse as sp
 from racing_lib.errors import PlanningError
 from racing_lib.planning.speed import segment_times, speed_profile
 from racing_lib.planning.trajectory import Trajectory, default_model_inputs
+
+if TYPE_CHECKING:
+    from racing_lib.model.params import ModelParams
 
 #: Body width of the default car (racing_lib.vehicle.VehicleParams.width), m.
 DEFAULT_CAR_WIDTH = 2.008
@@ -317,7 +320,7 @@ class CurvatureResult:
 
 
 def steady_cornering(
-    v: np.ndarray, kappa: np.ndarray, params: Any, max_use: float = 0.98
+    v: np.ndarray, kappa: np.ndarray, params: ModelParams, max_use: float = 0.98
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Lateral velocity, yaw rate and steering of steady cornering at speed v on curvature kappa.
 
@@ -476,7 +479,7 @@ def _lateral_qp(
 #   keep the best), whose state carries from pass to pass
 def solve_curvature(
     track: Any,
-    params: Any = None,
+    params: ModelParams | None = None,
     options: Any = None,
     settings: CurvatureSettings | None = None,
     *,

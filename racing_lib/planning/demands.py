@@ -23,11 +23,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from racing_lib.vehicle.forces import NUMPY_OPS, slip_angles
+
+if TYPE_CHECKING:
+    from racing_lib.model.params import ModelParams
 
 __all__ = ["Demand", "format_demands", "plan_demands"]
 
@@ -75,7 +78,7 @@ def _largest(name: str, unit: str, values: np.ndarray, s: np.ndarray, limit: flo
 
 
 def plan_demands(
-    trajectory: Any, params: Any = None, vehicle: Any = None, track: Any = None
+    trajectory: Any, params: ModelParams | None = None, vehicle: Any = None, track: Any = None
 ) -> list[Demand]:
     """The largest demand of each kind along ``trajectory`` (see the module notes).
 

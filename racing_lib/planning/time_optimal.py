@@ -51,7 +51,7 @@ import dataclasses
 import time
 from collections import OrderedDict
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -66,6 +66,9 @@ from racing_lib.planning.curvature import (
 )
 from racing_lib.planning.speed import speed_profile
 from racing_lib.planning.trajectory import Trajectory, default_model_inputs
+
+if TYPE_CHECKING:
+    from racing_lib.model.params import ModelParams
 
 # Variables per node, in this order, with their typical magnitudes (for scaling).
 _VARS = ("VX", "VY", "R", "EPSI", "EY", "DELTA", "AX")
@@ -210,7 +213,9 @@ class _Problem:
 
     # long function: the NLP's variables, dynamics, bounds and cost, built in the order the paper
     #   states them
-    def __init__(self, grid: TrackGrid, params: Any, options: Any, st: TimeOptimalSettings) -> None:
+    def __init__(
+        self, grid: TrackGrid, params: ModelParams, options: Any, st: TimeOptimalSettings
+    ) -> None:
         import casadi as ca
 
         from racing_lib.model import NU, NX, U, X, model_terms, spatial_dynamics
@@ -340,7 +345,9 @@ _CACHE: OrderedDict[tuple[Any, ...], _Problem] = OrderedDict()
 _CACHE_SIZE = 4
 
 
-def _problem(grid: TrackGrid, track: Any, params: Any, options: Any, st: TimeOptimalSettings):
+def _problem(
+    grid: TrackGrid, track: Any, params: ModelParams, options: Any, st: TimeOptimalSettings
+):
     key = (
         track.checksum() if hasattr(track, "checksum") else id(track),
         grid.n,
@@ -367,7 +374,7 @@ def clear_cache() -> None:
 
 
 def _initial_guess(
-    grid: TrackGrid, params: Any, start: Any, cold_speed: float
+    grid: TrackGrid, params: ModelParams, start: Any, cold_speed: float
 ) -> tuple[np.ndarray, str]:
     """Initial values (7, N) in physical units, and the kind of start."""
     n = grid.n
@@ -461,7 +468,7 @@ def ipopt_solver(name: str, nlp: dict[str, Any], st: Any) -> Any:
 #   place
 def solve_time_optimal(
     track: Any,
-    params: Any = None,
+    params: ModelParams | None = None,
     options: Any = None,
     settings: TimeOptimalSettings | None = None,
     *,

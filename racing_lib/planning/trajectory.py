@@ -20,7 +20,7 @@ import math
 import os
 from dataclasses import dataclass, field
 from functools import cached_property
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -28,6 +28,9 @@ from numpy.typing import ArrayLike
 from racing_lib.errors import PlanningError, RacingLibError
 from racing_lib.io import atomic_write_text
 from racing_lib.planning.speed import segment_times, speed_profile
+
+if TYPE_CHECKING:
+    from racing_lib.model.params import ModelParams
 
 #: Version of the plan CSV format written by :meth:`Trajectory.save_csv`.
 PLAN_FORMAT_VERSION = 2
@@ -449,7 +452,7 @@ class Trajectory:
     def from_centerline(
         cls,
         track: Any,
-        params: Any = None,
+        params: ModelParams | None = None,
         pedal_map: Any = None,
         options: Any = None,
         spacing: float = 3.0,
@@ -488,7 +491,7 @@ class Trajectory:
         path: Any,
         s: np.ndarray,
         theta: np.ndarray,
-        params: Any,
+        params: ModelParams,
         pedal_map: Any,
         options: Any,
         v_top: float | None,
@@ -539,7 +542,9 @@ class Trajectory:
         )
 
 
-def default_model_inputs(params: Any, pedal_map: Any, options: Any) -> tuple[Any, Any, Any]:
+def default_model_inputs(
+    params: ModelParams | None, pedal_map: Any, options: Any
+) -> tuple[ModelParams, Any, Any]:
     """Fill in the defaults: the identified parameter set, its pedal map, ``ModelOptions()``.
 
     The planners use the model identified from driving data (chapter 02, shipped with the package)
