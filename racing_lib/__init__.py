@@ -1,7 +1,8 @@
 """racing_lib: model-based planning and control for time-trial racing.
 
-The library behind the racing-lab course. Data flows one way:
-track -> vehicle/model -> planning -> control -> experiment -> plotting.
+The library behind the racing-lab course, in one-way layers (each imports only from those below
+it; CONTRIBUTING.md maps them): geometry and tracks -> vehicle -> model -> interfaces and the
+simulated car -> planning -> control -> experiments -> face (command line, figures, notebooks).
 """
 
 from racing_lib.errors import (

@@ -1,7 +1,7 @@
 """Small file helpers shared by every module that writes.
 
-Small file helpers shared by every module that writes: atomic writes, JSON-ready values, and
-where the package's shipped data lives (:func:`data_file`).
+Atomic writes, JSON-ready values, and where the package's shipped data lives
+(:func:`data_file`).
 
 A write goes to a temporary file in the same folder and is then renamed over the target, so an
 interrupted run leaves either the old file or the new one, never half of one.
@@ -73,8 +73,8 @@ def atomic_savefig(fig: Any, path: str | os.PathLike[str], **kwargs: Any) -> Non
 def jsonable(obj: Any) -> Any:
     """A JSON-ready copy of ``obj``.
 
-    A JSON-ready copy of ``obj``: NumPy arrays and scalars become Python values, tuples lists,
-    dict keys strings, and NaN or infinite floats None (JSON has no such numbers).
+    NumPy arrays and scalars become Python values, tuples lists, dict keys strings, and NaN or
+    infinite floats None (JSON has no such numbers).
     """
     if isinstance(obj, dict):
         return {str(k): jsonable(v) for k, v in obj.items()}

@@ -158,9 +158,11 @@ def _imports_of(source: str, package: str) -> set[str]:
 def imported_modules(modules: Iterable[str], root: Path = PACKAGE_ROOT) -> list[str]:
     """``modules`` and every module of the package they import, directly or not, sorted.
 
-    Read from the source (nothing is imported), function-level imports included, and with the
-    packages whose ``__init__`` runs on the way (importing ``racing_lib.a.b`` runs ``racing_lib``
-    and ``racing_lib.a`` first).
+    Read from the source (nothing is imported), function-level imports included. The packages
+    whose ``__init__`` runs on the way (importing ``racing_lib.a.b`` runs ``racing_lib`` and
+    ``racing_lib.a`` first) are listed too, but their own imports are not followed: a package's
+    ``__init__`` that re-exports its siblings does not make them part of every computation that
+    imports one of them.
 
     Parameters
     ----------
@@ -170,49 +172,51 @@ def imported_modules(modules: Iterable[str], root: Path = PACKAGE_ROOT) -> list[
         The package's folder (default: this installation's ``racing_lib/``).
     """
     todo = list(modules)
-    seen: set[str] = set()
+    followed: set[str] = set()
+    parents: set[str] = set()
     while todo:
         name = todo.pop()
-        if name in seen:
+        if name in followed:
             continue
         path = _module_file(name, root)
         if path is None:
             continue  # an imported name that is not a module (a function, a class)
-        seen.add(name)
+        followed.add(name)
         parts = name.split(".")
-        todo.extend(".".join(parts[:i]) for i in range(1, len(parts)))
+        parents.update(".".join(parts[:i]) for i in range(1, len(parts)))
         todo.extend(_imports_of(path.read_text(encoding="utf-8"), parts[0]))
-    return sorted(seen)
+    return sorted(followed | {p for p in parents if _module_file(p, root) is not None})
 
 
-def _data_files(path: Path, root: Path) -> list[Path]:
-    """Files of ``root/data`` whose names appear as string constants in the module at ``path``."""
-    data = root / "data"
-    shipped = {f.name for f in data.iterdir() if f.is_file()} if data.is_dir() else set()
-    names = {
-        node.value
-        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8")))
-        if isinstance(node, ast.Constant) and isinstance(node.value, str)
-    }
-    return sorted(data / n for n in names & shipped)
+def _code_text(path: Path) -> str:
+    """The code of a module as its syntax tree, without docstrings (comments never reach it).
+
+    So that a cache keyed by the code follows what runs, not how it is explained: a reworded
+    docstring or comment leaves the key alone, any change of a statement moves it.
+    """
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Module | ast.ClassDef | ast.FunctionDef | ast.AsyncFunctionDef):
+            body = node.body
+            if body and isinstance(body[0], ast.Expr) and isinstance(body[0].value, ast.Constant):
+                if isinstance(body[0].value.value, str):
+                    node.body = body[1:] or [ast.Pass()]
+    return ast.dump(tree, include_attributes=False)
 
 
 def code_digest(modules: Iterable[str], root: Path = PACKAGE_ROOT) -> str:
-    """Hash (16 hex characters) of the source that ``modules`` run, and of the data it reads.
+    """Hash (16 hex characters) of the code that ``modules`` run.
 
-    The source of ``modules`` and of every package module they import (:func:`imported_modules`),
-    plus each file of ``racing_lib/data`` that one of those modules names in a string constant
-    (such as ``"identified_params.json"``). Any edit, move or new import in that code changes the
-    hash; code the modules never import does not.
+    The syntax trees, docstrings left out, of ``modules`` and of every package module they import
+    (:func:`imported_modules`). Any change of a statement in that code, a move or a new import
+    changes the hash; documentation and code the modules never import do not. Data files are not
+    hashed: what a computation reads from them (parameters, weights) belongs in its cache key by
+    value.
     """
     digest = hashlib.sha256()
-    files: set[Path] = set()
     for name in imported_modules(modules, root):
         path = _module_file(name, root)
         assert path is not None  # imported_modules keeps modules with a file only
-        files.add(path)
-        files.update(_data_files(path, root))
-    for path in sorted(files):
-        digest.update(path.relative_to(root).as_posix().encode())
-        digest.update(path.read_bytes())
+        digest.update(name.encode())
+        digest.update(_code_text(path).encode())
     return digest.hexdigest()[:16]

@@ -25,10 +25,13 @@ LONG_FUNCTION_MARK = "# long function:"
 
 
 def _lint_imports(cwd: Path, package_parent: Path) -> subprocess.CompletedProcess:
-    lint = Path(sys.executable).with_name("lint-imports")
+    # import-linter's command through this interpreter: no reliance on a script on PATH.
+    command = (
+        "import sys; from importlinter.cli import lint_imports_command; lint_imports_command()"
+    )
     env = {**os.environ, "PYTHONPATH": str(package_parent)}
     return subprocess.run(
-        [str(lint), "--config", str(ROOT / "pyproject.toml"), "--no-cache"],
+        [sys.executable, "-c", command, "--config", str(ROOT / "pyproject.toml"), "--no-cache"],
         cwd=cwd,
         env=env,
         capture_output=True,

@@ -1,4 +1,4 @@
-"""Tests of the MPC tracking controllers and their QP layer (racing_lib.control.mpc, mpc_qp)."""
+"""Tests of the MPC tracking controllers and their QP layer (racing_lib.control.mpc)."""
 
 from __future__ import annotations
 
@@ -239,7 +239,7 @@ def circle_setup():
 
 @pytest.mark.parametrize("substeps", [1, 4])
 def test_linearization_is_exact_to_first_order(circle_setup, substeps):
-    """One step of the affine model vs. model.py's nonlinear step: error O(|perturbation|^2)."""
+    """One step of the affine model vs. the model's nonlinear step: error O(|perturbation|^2)."""
     plan, params = circle_setup
     st = MPCSettings(horizon=4, substeps=substeps, jit=False)  # no compile time in tests
     mpc = CoupledMPC(plan, params=params, settings=st)
@@ -250,7 +250,7 @@ def test_linearization_is_exact_to_first_order(circle_setup, substeps):
     A, B, d = mpc.linearize(
         np.tile(xi_bar, (N, 1)), np.tile(u_bar, (N, 1)), np.full(N, kappa), np.full(N, theta)
     )
-    # The nonlinear discrete step: model.py's RK4, chained as the MPC chains it.
+    # The nonlinear discrete step: the model's RK4, chained as the MPC chains it.
     n_sub = substeps
     step = discretize(params, mpc.options, 0.1 / n_sub, "rk4")
 

@@ -8,6 +8,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+from racing_lib.errors import ArgumentError
 from racing_lib.experiments.ablation.paper import (
     PAPER,
     PAPER_FIELDS,
@@ -67,6 +68,8 @@ def test_a_corner_window_wraps_around_the_line():
         True, True, True, False, True, True,
     ]  # fmt: skip
     assert nearest_corner({1: 100.0, 2: 600.0}, 450.0) == 2
+    assert nearest_corner({1: 30.0, 2: 500.0}, 990.0) == 2  # straight-line distance
+    assert nearest_corner({1: 30.0, 2: 500.0}, 990.0, length=1000.0) == 1  # around the loop
 
 
 def test_below_plan_counts_only_where_the_lap_got():
@@ -85,6 +88,6 @@ def test_a_notebook_table_is_html_with_code_and_escaped_text():
     assert "<code>main</code>" in html and "a &lt; b" in html and "1 &amp; 2" in html
     assert "|" not in html
     assert repr(t).splitlines()[0].split() == ["row", "a", "<", "b"]
-    with pytest.raises(ValueError, match="2 cells"):
+    with pytest.raises(ArgumentError, match="2 cells"):
         Table(["a", "b"], [["only one"]])
     assert Table.from_records([{"x": "1", "y": "2"}]).rows == [["1", "2"]]

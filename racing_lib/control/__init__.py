@@ -5,10 +5,7 @@ from __future__ import annotations
 from typing import Any
 
 from racing_lib.errors import ControlError
-from racing_lib.interfaces import (
-    Command,
-    Controller,
-)
+from racing_lib.interfaces import Controller
 
 CONTROLLER_NAMES = ("nominal", "coupled-mpc", "decoupled-mpc")
 
@@ -77,4 +74,4 @@ def build_controller(
     raise ControlError(f"unknown controller {name!r}; choose one of {', '.join(CONTROLLER_NAMES)}.")
 
 
-__all__ = ["CONTROLLER_NAMES", "Command", "Controller", "build_controller"]
+__all__ = ["CONTROLLER_NAMES", "build_controller"]

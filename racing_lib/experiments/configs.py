@@ -1,7 +1,7 @@
 """The configurations of the paper's tables and the weights tuned for them.
 
-The configurations of the paper's tables: how each is planned and driven, and the weights tuned
-for it (shipped in ``racing_lib/data/tuned_weights.json``).
+How each configuration is planned and driven, and the weights tuned for it (shipped in
+``racing_lib/data/tuned_weights.json``).
 """
 
 from __future__ import annotations
@@ -18,17 +18,20 @@ import numpy as np
 
 from racing_lib.errors import ControlError
 from racing_lib.experiments.tuning import (
-    _seed_tuple,
     evaluate_weights,
     mpc_weight_space,
+    seed_tuple,
     tune_weights,
 )
 from racing_lib.io import atomic_write_json, data_file, jsonable
 from racing_lib.optim.cmaes import TuningResult, TuningSettings
 
 __all__ = [
+    "TUNED_FILE_FORMAT",
+    "TUNED_WEIGHTS_FILE",
     "TUNING_CONFIGS",
     "config_plan",
+    "configuration_name",
     "config_spec",
     "generate_tuned_weights",
     "main_tuning_tracks",
@@ -326,7 +329,7 @@ def generate_tuned_weights(
     settings : TuningSettings, optional
         CMA-ES settings (default :meth:`TuningSettings.default`).
     executor, workers
-        Where laps run (see :meth:`CmaTuner.run`).
+        Where laps run (see :meth:`~racing_lib.optim.cmaes.CmaTuner.run`).
     out : path, optional
         The JSON file written (default: ``racing_lib/data/tuned_weights.json`` of the source
         tree this module was imported from).
@@ -373,7 +376,7 @@ def generate_tuned_weights(
         )
         results[name] = res
         # The defaults' score on the same laps, so a reader sees what tuning bought.
-        at_defaults = evaluate_weights(spec, {}, _seed_tuple(seeds))
+        at_defaults = evaluate_weights(spec, {}, seed_tuple(seeds))
         data["configs"][name] = jsonable(
             {
                 "weights": res.best_weights,
@@ -389,7 +392,7 @@ def generate_tuned_weights(
                 "options": TUNING_CONFIGS[name]["options"],
                 "controller": specs[0].controller,
                 "smooth_transition": specs[0].smooth_transition,
-                "seeds": list(_seed_tuple(seeds)),
+                "seeds": list(seed_tuple(seeds)),
                 "generations": res.generations,
                 "evaluations": res.evaluations,
                 "started_from": _start_label(initial),

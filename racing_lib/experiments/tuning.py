@@ -1,7 +1,6 @@
 """CMA-ES tuning of controller weights over closed-loop laps.
 
-CMA-ES tuning of controller weights over closed-loop laps (paper Section "Hyperparameter
-Optimization"; taught in notebook 06).
+Paper Section "Hyperparameter Optimization"; taught in notebook 06.
 
 The paper tunes the six weights of its MPC cost (v_x, v_y, yaw rate, e_psi, e_y, steering rate)
 with CMA-ES, minimizing a score of closed-loop laps (:func:`tuning_objective`). The optimizer is the
@@ -44,6 +43,7 @@ __all__ = [
     "evaluate_weights",
     "mpc_weight_space",
     "nominal_gain_space",
+    "seed_tuple",
     "tune_nominal_gains",
     "tune_weights",
     "tuning_objective",
@@ -174,7 +174,8 @@ def tuning_objective(
     return value
 
 
-def _seed_tuple(seeds: int | Iterable[int] | None) -> tuple[int | None, ...]:
+def seed_tuple(seeds: int | Iterable[int] | None) -> tuple[int | None, ...]:
+    """Seeds as a tuple of ints (one None: the car's per-trial randomness off)."""
     if seeds is None or isinstance(seeds, int | np.integer):
         return (None if seeds is None else int(seeds),)
     out = tuple(int(s) for s in seeds)
@@ -245,7 +246,7 @@ def _mean_objective(
 
     length = float(spec.track.length)
     values = []
-    for seed in _seed_tuple(seeds):
+    for seed in seed_tuple(seeds):
         # Built outside the try: a controller that cannot be built (unknown name, bad weight) is
         # a mistake to report, not a bad candidate.
         car, ctrl = make_car(spec), build_controller()
@@ -398,7 +399,8 @@ def tune_weights(
     w_t, w_s : float
         Weights of the objective's collision and distance terms.
     executor, workers, out_dir, resume, progress
-        As for :meth:`CmaTuner.run`; here ``workers=None`` (default) means one process per CPU.
+        As for :meth:`~racing_lib.optim.cmaes.CmaTuner.run`; here ``workers=None`` (default) means
+        one process per CPU.
 
     Returns
     -------
@@ -407,7 +409,7 @@ def tune_weights(
     """
     import functools
 
-    f = functools.partial(evaluator, spec, seeds=_seed_tuple(seeds), w_t=w_t, w_s=w_s)
+    f = functools.partial(evaluator, spec, seeds=seed_tuple(seeds), w_t=w_t, w_s=w_s)
     return tune(
         f,
         space or mpc_weight_space(),

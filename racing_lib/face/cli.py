@@ -19,6 +19,7 @@ from pathlib import Path as FilePath
 from typing import Any
 
 from racing_lib.errors import RacingLibError
+from racing_lib.planning import METHODS
 
 DEFAULT_TRACK = "expressway"
 
@@ -554,7 +555,6 @@ def _add_planner_knobs(p: argparse.ArgumentParser) -> None:
     )
 
 
-METHODS = ("centerline", "curvature", "time-optimal")
 CONTROLLERS = ("nominal", "coupled-mpc", "decoupled-mpc")
 
 

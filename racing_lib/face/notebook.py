@@ -16,6 +16,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from racing_lib.config import fast_mode
+from racing_lib.errors import ArgumentError
 from racing_lib.face.plotting import set_style
 
 _SOLVERS = ("numpy", "scipy", "casadi", "cvxpy", "osqp", "control", "cma")
@@ -39,7 +40,7 @@ class Table:
         self.rows = [[str(c) for c in row] for row in rows]
         bad = [i for i, row in enumerate(self.rows) if len(row) != len(self.header)]
         if bad:
-            raise ValueError(
+            raise ArgumentError(
                 f"Table rows {bad} do not have {len(self.header)} cells, one per column title."
             )
 

@@ -10,7 +10,14 @@ from scipy.spatial import cKDTree
 
 from racing_lib.errors import TrackError
 
-__all__ = ["BRIDGE_MIN_ANGLE_DEG", "BRIDGE_MIN_SEPARATION", "Crossing", "find_crossings"]
+__all__ = [
+    "BRIDGE_MIN_ANGLE_DEG",
+    "BRIDGE_MIN_SEPARATION",
+    "Crossing",
+    "find_crossings",
+    "refuse_broken_crossing",
+    "self_intersections",
+]
 
 
 def _segments_intersect(p1, p2, q1, q2) -> np.ndarray:

@@ -1,8 +1,9 @@
 """The planning and control model: a dynamic bicycle in Frenet coordinates, written once.
 
+* :mod:`racing_lib.model.states`: the state and input vectors, indexed by :class:`X` and
+  :class:`U`.
 * :mod:`racing_lib.model.equations`: the equations (paper Eq. 1-15) as CasADi functions, in the
-  time and the spatial domain, their Jacobians and discretizations; the state and input indices
-  :class:`X` and :class:`U`.
+  time and the spatial domain, their Jacobians and discretizations.
 * :mod:`racing_lib.model.params`: :class:`ModelParams`, :class:`ModelOptions`, :class:`PedalMap`.
 * :mod:`racing_lib.model.numeric`: :class:`Model`, the same equations for NumPy users.
 * :mod:`racing_lib.model.identified`: the shipped identified parameters (chapter 02's fit).
@@ -14,11 +15,7 @@ Taught in notebook 02.
 """
 
 from racing_lib.model.equations import (
-    NU,
-    NX,
     VX_GUARD,
-    U,
-    X,
     discrete_dynamics,
     discrete_linearization,
     discretize,
@@ -31,6 +28,7 @@ from racing_lib.model.equations import (
 from racing_lib.model.identified import identified_params, identified_steer_tau
 from racing_lib.model.numeric import Model
 from racing_lib.model.params import BRAKE_KNEE, ModelOptions, ModelParams, PedalMap
+from racing_lib.model.states import NU, NX, U, X
 
 __all__ = [
     "BRAKE_KNEE",

@@ -85,7 +85,7 @@ from racing_lib.errors import ModelError
 from racing_lib.model.params import ModelOptions, ModelParams
 from racing_lib.model.states import NU, NX, Domain, Method, U, X, as_float
 
-# The force laws are defined once, in vehicle.py, for floats, numpy and CasADi alike
+# The force laws are defined once, in racing_lib/vehicle/forces.py, for floats, numpy and CasADi
 from racing_lib.vehicle import (
     drag_force,
     lateral_load_transfer,
@@ -97,11 +97,7 @@ from racing_lib.vehicle import (
 )
 
 __all__ = [
-    "NU",
-    "NX",
     "VX_GUARD",
-    "U",
-    "X",
     "discrete_dynamics",
     "discrete_linearization",
     "discretize",
@@ -425,7 +421,8 @@ def discrete_linearization(
     ``xi_next ~= A_d xi + B_d u + d_d`` exact to first order: ``A_d = dF/dxi``, ``B_d = dF/du`` at
     the point and ``d_d = F(xi_bar, u_bar) - A_d xi_bar - B_d u_bar`` (the paper's ``A_k, B_k,
     D_k``). Use ``.map(N)`` to linearize N stages in one call (inputs stacked as columns; ``A_d``
-    comes back as 6 x 6N), or :meth:`Model.linearize` for numpy arrays. Arguments as in
+    comes back as 6 x 6N), or :meth:`~racing_lib.model.numeric.Model.linearize` for numpy arrays.
+    Arguments as in
     :func:`discretize`.
     """
     F = discretize(params, options, step, method, domain)

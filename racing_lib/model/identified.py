@@ -61,6 +61,6 @@ def identified_steer_tau() -> float:
 
     Not part of :class:`~racing_lib.model.ModelParams` (the planning model has no actuator); the
     MPC and the open-loop predictions of notebook 02 use it to turn commands into road-wheel
-    angles (see :func:`lagged_steering`).
+    angles (see :func:`~racing_lib.model.actuator.lagged_steering`).
     """
     return float(shipped_fit()["steer_tau"])

@@ -23,7 +23,7 @@ from racing_lib.model.equations import (
 from racing_lib.model.params import ModelOptions, ModelParams
 from racing_lib.model.states import NU, NX, Domain, Method, per_stage, state_rows
 
-# The force laws are defined once, in vehicle.py, for floats, numpy and CasADi alike
+# The force laws are defined once, in racing_lib/vehicle/forces.py, for floats, numpy and CasADi
 
 __all__ = ["Model"]
 

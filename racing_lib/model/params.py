@@ -25,7 +25,7 @@ from numpy.typing import ArrayLike
 from racing_lib.errors import ModelError
 from racing_lib.model.states import NX, X, as_float, state_rows
 
-# The force laws are defined once, in vehicle.py, for floats, numpy and CasADi alike
+# The force laws are defined once, in racing_lib/vehicle/forces.py, for floats, numpy and CasADi
 from racing_lib.vehicle import (
     VehicleParams,
     axle_cornering_stiffness,
@@ -227,7 +227,6 @@ class PedalMap:
     def throttle_gain(self, v_x: Any) -> Any:
         """Acceleration added by full throttle at speed ``v_x`` (m/s), m/s^2.
 
-        Acceleration added by full throttle at speed ``v_x`` (m/s), m/s^2:
         ``min(m_thr, p_thr / v_x)`` (``m_thr`` without a power limit).
 
         Works on floats, arrays and CasADi expressions. Below 1 m/s the speed is taken as 1 m/s
@@ -297,8 +296,7 @@ class PedalMap:
     def full_brake(self) -> float:
         """Deceleration added by full brake, m/s^2.
 
-        Deceleration added by full brake, m/s^2: ``a_brk_max`` if the tyres limit it, else
-        ``m_brk``.
+        ``a_brk_max`` if the tyres limit it, else ``m_brk``.
         """
         return self.m_brk if self._brake_knee() is None else float(self.a_brk_max)
 
@@ -445,8 +443,7 @@ class ModelParams:
     def cornering_stiffness(self, theta: float = 0.0) -> tuple[float, float]:
         """Linear cornering stiffnesses ``C_alpha = mu F_z0 B C D`` (N/rad) at the static loads.
 
-        Linear cornering stiffnesses ``C_alpha = mu F_z0 B C D`` (N/rad) at the static loads: the
-        slope of the Pacejka curve at zero slip.
+        The slope of the Pacejka curve at zero slip.
         """
         F_zf, F_zr = self.static_loads(theta)
         return (

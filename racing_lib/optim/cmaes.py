@@ -270,8 +270,8 @@ class CmaTuner:
     settings : TuningSettings, optional
         Defaults: :meth:`TuningSettings.default` (fast mode shrinks the budget).
     success_threshold : float
-        ``success`` requires the best objective to be below this (lap tuning:
-        :data:`INCOMPLETE_PENALTY`, i.e. a completed lap).
+        ``success`` requires the best objective to be below this (the lap tuning of
+        :mod:`racing_lib.experiments.tuning` passes its penalty for an incomplete lap).
     """
 
     def __init__(

@@ -152,7 +152,8 @@ def plan(
         curvature-optimal QP; ``time-optimal``: the NLP warm-started from the QP (two-stage
         planner).
     params : ModelParams, optional
-        Planning model parameters (default: the identified set, ``sysid.identified_params()``).
+        Planning model parameters (default: the identified set,
+        :func:`racing_lib.model.identified.identified_params`).
     options : ModelOptions, optional
         Model effects (default ``ModelOptions()``).
     spacing : float

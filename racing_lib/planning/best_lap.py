@@ -97,9 +97,8 @@ _SCALE = np.array([30.0, 1.0, 0.5, 0.1, 0.2, 5.0, 0.1, 5000.0, 10000.0, 5.0, 10.
 def _wheel_limits(p: VehicleParams, fz: Any, front: bool, alpha: Any, ops: Any) -> tuple[Any, Any]:
     """Brake (ABS) and drive (traction control) limits of one wheel, N.
 
-    Brake (ABS) and drive (traction control) limits of one wheel, N: the sim's tyre law
-    (:func:`racing_lib.vehicle.dynamics.tyre_limits`) with its floors' kinks rounded off (width
-    0.01), since a kink in a constraint at the optimum makes IPOPT cycle.
+    The sim's tyre law (:func:`racing_lib.vehicle.dynamics.tyre_limits`) with its floors' kinks
+    rounded off (width 0.01), since a kink in a constraint at the optimum makes IPOPT cycle.
     """
     b, c, d = (p.B_f, p.C_f, p.D_f) if front else (p.B_r, p.C_r, p.D_r)
     w_half = 0.5 * p.m * p.g / (p.l_f + p.l_r)

@@ -74,12 +74,13 @@ import scipy.sparse as sp
 from racing_lib.errors import PlanningError
 from racing_lib.planning.speed import segment_times, speed_profile
 from racing_lib.planning.trajectory import Trajectory, default_model_inputs
+from racing_lib.vehicle.params import VehicleParams
 
 if TYPE_CHECKING:
     from racing_lib.model.params import ModelParams
 
 #: Body width of the default car (racing_lib.vehicle.VehicleParams.width), m.
-DEFAULT_CAR_WIDTH = 2.008
+DEFAULT_CAR_WIDTH = VehicleParams().width
 #: Default clearance between the car's side and a wall, m. A wall costs speed, so the plan leaves
 #: room for the coupled MPC's tracking error where the line passes a wall (about 0.4 m at most on
 #: the expressway; with 0.5 m the car brushed the wall after corner 3 in every seed).
@@ -493,7 +494,8 @@ def solve_curvature(
     track : Track
         The track (its centerline is the Frenet reference).
     params : ModelParams, optional
-        Planning model parameters (default: the identified set, ``sysid.identified_params()``).
+        Planning model parameters (default: the identified set,
+        :func:`racing_lib.model.identified.identified_params`).
     options : ModelOptions, optional
         Model effects (default ``ModelOptions()``): used in the linearized dynamics and the drag in
         the speed profile.

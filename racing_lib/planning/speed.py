@@ -32,8 +32,7 @@ from numpy.typing import ArrayLike
 
 from racing_lib.errors import PlanningError
 from racing_lib.model.params import ModelParams
-
-G = 9.81  # gravitational acceleration, m/s^2
+from racing_lib.vehicle.params import G
 
 #: Top speed used when neither the caller nor the parameters give one: 190 km/h, m/s.
 DEFAULT_V_TOP = 190.0 / 3.6

@@ -465,7 +465,8 @@ class Trajectory:
         track : Track
             The track.
         params : ModelParams, optional
-            Planning parameters (default: the identified set, ``sysid.identified_params()``).
+            Planning parameters (default: the identified set,
+            :func:`racing_lib.model.identified.identified_params`).
         pedal_map : PedalMap, optional
             a_x limits (default: ``params.pedal_map`` if present).
         options : ModelOptions, optional

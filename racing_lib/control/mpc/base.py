@@ -1,7 +1,7 @@
 """What the coupled and the decoupled MPC share.
 
-What the coupled and the decoupled MPC share: the plan table, the track band, the reference,
-the linearization along it, the pedal bounds, the fallback when a QP fails, and timing.
+The plan table, the track band, the reference, the linearization along it, the pedal bounds,
+the fallback when a QP fails, and timing.
 """
 
 from __future__ import annotations
@@ -225,9 +225,8 @@ class MPCBase:
     def stats(self) -> dict[str, float]:
         """Counters of the lap.
 
-        Counters of the lap: ``qp_failures``, ``fallback_shifted``, ``fallback_brake`` and
-        ``qp_rescues`` (QPs that OSQP failed and Clarabel was asked to solve; those it solved too
-        are not failures).
+        ``qp_failures``, ``fallback_shifted``, ``fallback_brake`` and ``qp_rescues`` (QPs that OSQP
+        failed and Clarabel was asked to solve; those it solved too are not failures).
         """
         out = {k: float(v) for k, v in self._counters.items()}
         out["qp_rescues"] = float(sum(qp.rescues for qp in self._qp_list) - self._rescues_at_reset)

@@ -1,7 +1,7 @@
 """The paper's coupled MPC: one QP over the longitudinal and lateral dynamics.
 
-The paper's coupled MPC: one QP over the longitudinal and lateral dynamics, linearized along the
-heuristic trajectory that blends the measured state into the plan.
+The QP is linearized along the heuristic trajectory that blends the measured state into the
+plan.
 """
 
 from __future__ import annotations

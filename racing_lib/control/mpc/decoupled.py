@@ -1,7 +1,6 @@
 """The paper's controller ablation: a longitudinal and a lateral MPC.
 
-The paper's controller ablation: a longitudinal and a lateral MPC, each linearized about the
-reference alone.
+Each is linearized about the reference alone, with the other subsystem frozen at the reference.
 """
 
 from __future__ import annotations
@@ -32,7 +31,7 @@ class DecoupledMPC(MPCBase):
     model linearized about the reference (steering, lateral states at their reference values); the
     lateral MPC chooses ``delta`` to track ``[v_y, r, e_psi, e_y]`` assuming ``v_x`` and ``a_x``
     follow the reference. Both are linearized about the reference trajectory only (no heuristic
-    transition). Parameters as for :class:`CoupledMPC`.
+    transition). Parameters as for :class:`~racing_lib.control.mpc.coupled.CoupledMPC`.
     """
 
     def __init__(self, plan: Any, params: Any = None, options: Any = None, pedal_map: Any = None,

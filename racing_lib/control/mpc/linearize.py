@@ -1,7 +1,7 @@
 """The linear time-varying model the MPC predicts with.
 
-The linear time-varying model the MPC predicts with: the planning model linearized and
-discretized per stage, with the steering actuator's lag appended as a state.
+The planning model linearized and discretized per stage, with the steering actuator's lag
+appended as a state.
 """
 
 from __future__ import annotations
@@ -35,7 +35,7 @@ def substep_linearization(
     """CasADi Function ``(xi_bar, u_bar, kappa, theta) -> (A_d, B_d, d_d)`` of chained RK4 steps.
 
     CasADi Function ``(xi_bar, u_bar, kappa, theta) -> (A_d, B_d, d_d)`` of ``substeps`` chained
-    RK4 steps of model.py's :func:`~racing_lib.model.discretize` (step ``dt / substeps``).
+    RK4 steps of the model's :func:`~racing_lib.model.discretize` (step ``dt / substeps``).
 
     Same contract as :func:`racing_lib.model.discrete_linearization`, whose single RK4 step of
     0.1 s is unstable at low speed. With ``jit`` the Function is compiled to machine code by the
@@ -69,7 +69,7 @@ def substep_linearization(
 
 
 def continuous_linearization(params: Any, options: Any) -> Any:
-    """CasADi Function ``(xi, u, kappa, theta) -> (A_c, B_c, c)`` of model.py's time-domain model.
+    """CasADi Function ``(xi, u, kappa, theta) -> (A_c, B_c, c)``: the model linearized in time.
 
     ``xi_dot ~= A_c xi + B_c u + c`` near the point, with ``c = f - A_c xi - B_c u``.
     """

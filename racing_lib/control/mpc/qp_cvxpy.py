@@ -1,7 +1,7 @@
 """The MPC's QP as it reads on paper, in cvxpy: the readable reference.
 
-The MPC's QP as it reads on paper, in cvxpy (DPP parameters, OSQP underneath): the readable
-reference that the fast :class:`~racing_lib.control.mpc.qp_osqp.TrackingQP` must agree with.
+DPP parameters, OSQP underneath; the fast :class:`~racing_lib.control.mpc.qp_osqp.TrackingQP`
+must agree with it (a test checks it).
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """The MPC's QP on OSQP's fast path.
 
-The MPC's QP on OSQP's fast path: matrices built once with a fixed sparsity pattern, only their
-values overwritten at each control step, warm-started from the previous solution.
+Matrices built once with a fixed sparsity pattern, only their values overwritten at each control
+step, warm-started from the previous solution.
 """
 
 from __future__ import annotations

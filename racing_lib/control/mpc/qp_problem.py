@@ -2,15 +2,15 @@
 
 One QP (the data and settings here), two implementations that must agree (a test checks it):
 
-* :class:`~racing_lib.control.mpc.qp_cvxpy.CvxpyTrackingQP` writes the problem as it reads on paper,
-with cvxpy ``Parameter`` objects
-  (DPP, so cvxpy compiles it once) and OSQP underneath. It is the reference: easy to read, slow
-  (cvxpy spends several ms per solve in its own bookkeeping; 20-50 ms measured here).
+* :class:`~racing_lib.control.mpc.qp_cvxpy.CvxpyTrackingQP` writes the problem as it reads on
+  paper, with cvxpy ``Parameter`` objects (DPP, so cvxpy compiles it once) and OSQP underneath.
+  It is the reference: easy to read, slow (cvxpy spends several ms per solve in its own
+  bookkeeping; 20-50 ms measured here).
 * :class:`~racing_lib.control.mpc.qp_osqp.TrackingQP` builds OSQP's matrices once with a fixed
-sparsity pattern and, at each control
-  step, only overwrites their values (``update(Ax=..., q=..., l=..., u=...)``) and warm-starts from
-  the previous solution: 0.5-0.8 ms median for the coupled MPC's 6 states, 2 inputs and 20-30
-  stages (including the numeric refactorization that new matrix values require).
+  sparsity pattern and, at each control step, only overwrites their values
+  (``update(Ax=..., q=..., l=..., u=...)``) and warm-starts from the previous solution: 0.5-0.8 ms
+  median for the coupled MPC's 6 states, 2 inputs and 20-30 stages (including the numeric
+  refactorization that new matrix values require).
 
 The problem, over a horizon of ``N`` stages (``x_0`` given, ``u_{-1}`` the last applied input)::
 

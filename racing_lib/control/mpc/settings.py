@@ -24,8 +24,8 @@ __all__ = ["COUPLED_STATES", "LATERAL_STATES", "MX", "MPCSettings"]
 class MX(IntEnum):
     """Indices of the coupled MPC's state.
 
-    Indices of the coupled MPC's state: the model's state without ``s``, plus the steering
-    actuator's output (see :func:`augment_steering_lag`).
+    The model's state without ``s``, plus the steering actuator's output (see
+    :func:`~racing_lib.control.mpc.linearize.augment_steering_lag`).
     """
 
     VX = 0  #: longitudinal velocity, m/s
@@ -92,11 +92,13 @@ class MPCSettings:
         Time constant of the steering actuator's first-order lag, s (the simulated car's is
         0.08 s; ``racing_lib.experiments.sysid`` identifies it). The QP carries the actual steering
         angle as an extra state so that it knows a command acts only partly within the first period
-        (see :func:`augment_steering_lag`). 0 removes the lag model. At 45 m/s an unmodelled
-        0.08 s lag was enough to make the closed loop oscillate and spin the car.
+        (see :func:`~racing_lib.control.mpc.linearize.augment_steering_lag`). 0 removes the lag
+        model. At 45 m/s an unmodelled 0.08 s lag was enough to make the closed loop oscillate and
+        spin the car.
     smooth_transition : bool
         Linearize along the heuristic trajectory (True, the paper's method) or along the reference
-        itself (False: all lambda_k = 0, the ablation). Used by :class:`CoupledMPC` only.
+        itself (False: all lambda_k = 0, the ablation). Used by
+        :class:`~racing_lib.control.mpc.coupled.CoupledMPC` only.
     throttle_scale, brake_scale : float
         Factors on the pedal map's full-throttle and full-brake accelerations (``m_thr``,
         ``m_brk``) inside the MPC, for both the a_x bounds and the pedal inverse (1 = the map as
@@ -128,10 +130,10 @@ class MPCSettings:
         Steering of the braking fallback per rad of e_psi, rad/rad.
     discretization : str
         How the model is made discrete over ``dt``. ``"rk4"`` (default): ``substeps`` RK4 steps of
-        model.py's :func:`~racing_lib.model.discretize` chained, and the exact Jacobians of that
+        the model's :func:`~racing_lib.model.discretize` chained, and the exact Jacobians of that
         nonlinear discrete map (so the affine model is exact to first order). ``"zoh"``: the exact
         discretization of the continuous-time linearization with the input held (a matrix
-        exponential of model.py's Jacobians); stable at any speed, but only an O(dt^2)
+        exponential of the model's Jacobians); stable at any speed, but only an O(dt^2)
         approximation of the nonlinear step away from equilibria.
     substeps : int
         RK4 steps per period for ``"rk4"``. One RK4 step of 0.1 s is unstable for the tyre modes

@@ -28,8 +28,9 @@ The table of the full run is shipped with the package (:func:`shipped_table`), s
 07 loads it in seconds; :func:`generate_ablation_table` recomputes it.
 
 For the figures, each row keeps a ``profile`` of its first seed's lap and of its plan, sampled every
-:data:`PROFILE_SPACING` m of the track centerline (``s_m``, the same grid for every row of a
-track, so rows can be overlaid); values are None where the car never got (a lap that stopped):
+:data:`~racing_lib.experiments.ablation.profiles.PROFILE_SPACING` m of the track centerline
+(``s_m``, the same grid for every row of a track, so rows can be overlaid); values are None where
+the car never got (a lap that stopped):
 
 * ``profile["plan"]``: ``vx_mps`` (planned v_x), ``kappa_radpm`` (curvature of the planned line,
   1/m), ``delta_rad`` (planned steering angle), ``n_m`` (offset of the line from the centerline,
@@ -42,8 +43,10 @@ Modules: :mod:`~racing_lib.experiments.ablation.rows` (the rows),
 :mod:`~racing_lib.experiments.ablation.keys` (cache keys),
 :mod:`~racing_lib.experiments.ablation.runner` (plans, laps, the cache),
 :mod:`~racing_lib.experiments.ablation.profiles` (what the figures draw),
-:mod:`~racing_lib.experiments.ablation.table` (the tables, shipped and stale rows) and
-:mod:`~racing_lib.experiments.ablation.check` (a recomputed row against the shipped one).
+:mod:`~racing_lib.experiments.ablation.table` (the tables, shipped and stale rows),
+:mod:`~racing_lib.experiments.ablation.check` (a recomputed row against the shipped one) and
+:mod:`~racing_lib.experiments.ablation.paper` (the paper's own numbers, and the measures compared
+with them).
 
 Examples
 --------

@@ -22,7 +22,7 @@ from racing_lib.experiments.lap import (
 from racing_lib.geometry import Track
 from racing_lib.provenance import code_digest
 
-__all__ = ["FORMAT"]
+__all__ = ["FORMAT", "code_digests", "compact_json", "digest", "plan_key_inputs", "row_key_inputs"]
 
 #: Version of the row files; bumping it invalidates every cached row.
 FORMAT = 1
@@ -31,9 +31,12 @@ FORMAT = 1
 #: everything they import (read from the imports by :func:`racing_lib.provenance.code_digest`, so
 #: no list of files here can fall behind a move), enters the cache keys: a change of the planner
 #: or the controller invalidates the rows that depend on it, and only those.
+#: A plan is keyed by its planner's code (the configuration's method, options and parameters enter
+#: its key by value); a row by everything the runner runs, from the configuration and the weights
+#: to the laps and the numbers it keeps.
 _PLAN_CODE = ("racing_lib.planning",)
 _BEST_LAP_CODE = (*_PLAN_CODE, "racing_lib.planning.best_lap")
-_LAP_CODE = ("racing_lib.experiments.lap",)
+_LAP_CODE = ("racing_lib.experiments.ablation.runner",)
 
 # --------------------------------------------------------------------------------------------------
 # Cache keys
@@ -49,13 +52,13 @@ def _json_default(obj: Any) -> Any:
     raise TypeError(f"not JSON-serializable for a cache key: {type(obj).__name__}")
 
 
-def _digest(obj: Any) -> str:
+def digest(obj: Any) -> str:
     """Hash (hex, 16 characters) of a JSON-able object, independent of dict order."""
     text = json.dumps(obj, sort_keys=True, separators=(",", ":"), default=_json_default)
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
-def _code_digests() -> dict[str, str]:
+def code_digests() -> dict[str, str]:
     """Source digests of the plan, best-lap and lap code, read once per run.
 
     Once per run, because the worker processes keep the code they started with: a file edited
@@ -88,9 +91,10 @@ def _plan_options(row: AblationRow) -> dict[str, Any]:
     return {} if row.best_lap else dict(TUNING_CONFIGS[row.config]["options"])
 
 
-def _plan_key_inputs(
+def plan_key_inputs(
     row: AblationRow, track: Track, spacing: float | None, code: Mapping[str, str]
 ) -> dict[str, Any]:
+    """What determines a row's plan: track, method, options, parameters, spacing, planner code."""
     which, params = _planning_params(row)
     return {
         "kind": "plan",
@@ -107,7 +111,7 @@ def _plan_key_inputs(
     }
 
 
-def _row_key_inputs(
+def row_key_inputs(
     row: AblationRow,
     track: Track,
     plan_key: str,
@@ -115,6 +119,7 @@ def _row_key_inputs(
     seeds: Sequence[int],
     code: Mapping[str, str],
 ) -> dict[str, Any]:
+    """What determines a row's laps: its plan's key, controller, weights, seeds and the lap code."""
     from racing_lib.model.identified import identified_params
     from racing_lib.vehicle import VehicleParams
 
@@ -144,6 +149,6 @@ def _row_key_inputs(
 # A row from its trials
 
 
-def _compact_json(obj: Any) -> str:
+def compact_json(obj: Any) -> str:
     """One line of JSON without spaces (the profiles are most of a row: keep files small)."""
     return json.dumps(obj, sort_keys=True, separators=(",", ":"), allow_nan=False)

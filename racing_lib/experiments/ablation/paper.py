@@ -155,9 +155,18 @@ def corner_window(track: Any, corner: Any, s: np.ndarray, margin: float = 30.0) 
     return ((s - lo) % track.length) <= span
 
 
-def nearest_corner(corners: Mapping[int, float], s: float) -> int:
-    """The number of the corner (of ``{number: s}``, m) nearest to ``s`` (m)."""
-    return min(corners, key=lambda c: abs(corners[c] - s))
+def nearest_corner(corners: Mapping[int, float], s: float, length: float | None = None) -> int:
+    """The number of the corner (of ``{number: s}``, m) nearest to ``s`` (m).
+
+    With the track's ``length`` (m), distances are measured around the loop, so a corner just
+    before the line is near a point just after it.
+    """
+
+    def distance(c: int) -> float:
+        d = abs(corners[c] - s)
+        return min(d, length - d) if length else d
+
+    return min(corners, key=distance)
 
 
 def below_plan(row: Mapping[str, Any], by: float = 1.0) -> float:

@@ -11,12 +11,13 @@ import numpy as np
 from racing_lib.geometry import Track
 from racing_lib.planning.trajectory import Trajectory
 
-__all__ = ["PROFILE_SPACING"]
+__all__ = ["PROFILE_SPACING", "closed_loop_profile", "plan_profile", "profile_grid", "rounded"]
 #: Spacing of the stored profiles along the track centerline, m.
 PROFILE_SPACING = 10.0
 
 
-def _rounded(values: np.ndarray, decimals: int) -> list[float | None]:
+def rounded(values: np.ndarray, decimals: int) -> list[float | None]:
+    """Values rounded to ``decimals`` as a JSON-ready list (None for NaN or infinite)."""
     arr = np.round(np.asarray(values, dtype=float), decimals)
     return [float(v) if math.isfinite(v) else None for v in arr]
 
@@ -43,11 +44,12 @@ def _periodic_profile(
     return out
 
 
-def _profile_grid(track: Track) -> np.ndarray:
+def profile_grid(track: Track) -> np.ndarray:
+    """The arc lengths (m) every profile of a track is sampled at, :data:`PROFILE_SPACING` apart."""
     return np.arange(0.0, float(track.length), PROFILE_SPACING)
 
 
-def _closed_loop_profile(log: Any, track: Track) -> dict[str, list[float | None]]:
+def closed_loop_profile(log: Any, track: Track) -> dict[str, list[float | None]]:
     """The closed-loop lap on the track-centerline grid (every :data:`PROFILE_SPACING` m)."""
     lap = log.in_lap if log.in_lap.any() else np.ones_like(log.in_lap)
     s = np.asarray(log.s_track, dtype=float)[lap]
@@ -58,24 +60,24 @@ def _closed_loop_profile(log: Any, track: Track) -> dict[str, list[float | None]
     values = {"vx": vx, "steer": log.steer[lap], "kappa": kappa, "ey": log.ey[lap], "n": n}
     # A gap of a few control steps means the car stopped lapping there.
     gap = max(3.0 * PROFILE_SPACING, 3.0 * float(np.max(vx, initial=0.0)) * 0.1)
-    prof = _periodic_profile(s, values, _profile_grid(track), float(track.length), gap)
+    prof = _periodic_profile(s, values, profile_grid(track), float(track.length), gap)
     return {
-        "vx_mps": _rounded(prof["vx"], 2),
-        "steer_rad": _rounded(prof["steer"], 4),
-        "kappa_radpm": _rounded(prof["kappa"], 5),
-        "ey_m": _rounded(prof["ey"], 3),
-        "n_m": _rounded(prof["n"], 2),
+        "vx_mps": rounded(prof["vx"], 2),
+        "steer_rad": rounded(prof["steer"], 4),
+        "kappa_radpm": rounded(prof["kappa"], 5),
+        "ey_m": rounded(prof["ey"], 3),
+        "n_m": rounded(prof["n"], 2),
     }
 
 
-def _plan_profile(trajectory: Trajectory, track: Track) -> dict[str, list[float | None]]:
+def plan_profile(trajectory: Trajectory, track: Track) -> dict[str, list[float | None]]:
     """The plan on the track-centerline grid (every :data:`PROFILE_SPACING` m)."""
     s, n = track.centerline.to_frenet_along(trajectory.x, trajectory.y)
     values = {"vx": trajectory.vx, "kappa": trajectory.kappa, "delta": trajectory.delta, "n": n}
-    prof = _periodic_profile(s, values, _profile_grid(track), float(track.length), math.inf)
+    prof = _periodic_profile(s, values, profile_grid(track), float(track.length), math.inf)
     return {
-        "vx_mps": _rounded(prof["vx"], 2),
-        "kappa_radpm": _rounded(prof["kappa"], 5),
-        "delta_rad": _rounded(prof["delta"], 4),
-        "n_m": _rounded(prof["n"], 2),
+        "vx_mps": rounded(prof["vx"], 2),
+        "kappa_radpm": rounded(prof["kappa"], 5),
+        "delta_rad": rounded(prof["delta"], 4),
+        "n_m": rounded(prof["n"], 2),
     }

@@ -18,6 +18,8 @@ __all__ = [
     "AblationRow",
     "ablation_rows",
     "default_trials",
+    "format_number",
+    "row_summary",
     "select_rows",
 ]
 #: Seeded trials per row (the paper's ten).
@@ -155,6 +157,7 @@ def default_trials() -> int:
 
 
 def format_number(x: Any, decimals: int) -> str:
+    """``x`` with ``decimals`` digits, or ``-`` when there is no value."""
     return "-" if x is None else f"{float(x):.{decimals}f}"
 
 

@@ -18,18 +18,18 @@ import numpy as np
 from racing_lib.config import fast_mode
 from racing_lib.errors import ControlError, PlanningError, RacingLibError
 from racing_lib.experiments.ablation.keys import (
-    _code_digests,
-    _compact_json,
-    _digest,
-    _plan_key_inputs,
-    _row_key_inputs,
+    code_digests,
+    compact_json,
+    digest,
+    plan_key_inputs,
+    row_key_inputs,
 )
 from racing_lib.experiments.ablation.profiles import (
     PROFILE_SPACING,
-    _closed_loop_profile,
-    _plan_profile,
-    _profile_grid,
-    _rounded,
+    closed_loop_profile,
+    plan_profile,
+    profile_grid,
+    rounded,
 )
 from racing_lib.experiments.ablation.rows import (
     AblationRow,
@@ -56,7 +56,7 @@ from racing_lib.io import atomic_write_text, jsonable
 from racing_lib.planning.trajectory import Trajectory
 from racing_lib.tracks import load_track
 
-__all__ = ["DEFAULT_OUT", "run_ablation"]
+__all__ = ["DEFAULT_OUT", "resolve_tracks", "run_ablation"]
 #: The cache folder used when none is given, relative to the working directory.
 DEFAULT_OUT = "runs/ablation"
 
@@ -105,8 +105,8 @@ def _get_plan(
     code: Mapping[str, str],
 ) -> tuple[Trajectory, dict[str, Any]]:
     """A row's plan from the memo, the cache folder, or the planner (then cached)."""
-    inputs = _plan_key_inputs(row, track, spacing, code)
-    key = _digest(inputs)
+    inputs = plan_key_inputs(row, track, spacing, code)
+    key = digest(inputs)
     if key in memo:
         return memo[key]
     base = f"{track.name}-{inputs['method']}-{key}"
@@ -172,7 +172,7 @@ def _trial(spec: LapSpec, seed: int, profile_seed: int | None = None) -> _TrialO
     profile = None
     if seed == profile_seed:
         profile = {"seed": seed, "completed": res.metrics.completed}
-        profile["closed_loop"] = _closed_loop_profile(log, spec.track)
+        profile["closed_loop"] = closed_loop_profile(log, spec.track)
     return _TrialOutcome(
         metrics=res.metrics,
         vx_abs_err=np.abs(log.vx[lap] - log.vx_ref[lap]).astype(np.float32),
@@ -232,9 +232,9 @@ def _row_result(
     if profile is not None:
         profile = {
             "spacing_m": PROFILE_SPACING,
-            "s_m": _rounded(_profile_grid(track), 1),
+            "s_m": rounded(profile_grid(track), 1),
             **profile,
-            "plan": _plan_profile(trajectory, track),
+            "plan": plan_profile(trajectory, track),
         }
     row_dict: dict[str, Any] = {
         "name": row.name,
@@ -302,9 +302,10 @@ def _load_row(path: FilePath, key: str) -> dict[str, Any] | None:
     return data if isinstance(data, dict) and data.get("key") == key else None
 
 
-def _resolve_tracks(
+def resolve_tracks(
     rows: Sequence[AblationRow], tracks: Mapping[str, Track] | None
 ) -> dict[str, Track]:
+    """The tracks of ``rows`` by name: the given ones, the others loaded from the registry."""
     given = dict(tracks or {})
     names = sorted({r.track for r in rows})
     return {name: given[name] if name in given else load_track(name) for name in names}
@@ -398,9 +399,9 @@ def run_ablation(
     seeds = [int(seed) + i for i in range(n_trials)]
     say = log or _quiet
     folder = FilePath(out_dir) if out_dir is not None else None
-    track_objs = _resolve_tracks(selected, tracks)
+    track_objs = resolve_tracks(selected, tracks)
     memo: dict[str, tuple[Trajectory, dict]] = {}
-    code = _code_digests()
+    code = code_digests()
     own_pool: ProcessPoolExecutor | None = None
 
     def lap_executor() -> Executor | None:
@@ -424,9 +425,9 @@ def run_ablation(
             trk = track_objs[row.track]
             bar.set_description(row.name)
             weights = tuned_weights(row.config)
-            plan_key = _digest(_plan_key_inputs(row, trk, spacing, code))
-            key_inputs = _row_key_inputs(row, trk, plan_key, weights, seeds, code)
-            key = _digest(key_inputs)
+            plan_key = digest(plan_key_inputs(row, trk, spacing, code))
+            key_inputs = row_key_inputs(row, trk, plan_key, weights, seeds, code)
+            key = digest(key_inputs)
             path = _row_file(folder, row.name, key) if folder is not None else None
             cached = _load_row(path, key) if path is not None else None
             if cached is not None:
@@ -461,7 +462,7 @@ def run_ablation(
                 time.perf_counter() - tic,
             )
             if path is not None:
-                atomic_write_text(path, _compact_json(result))
+                atomic_write_text(path, compact_json(result))
                 result_file = str(path)
             else:
                 result_file = "not cached"

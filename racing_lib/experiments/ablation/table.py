@@ -14,14 +14,14 @@ from typing import Any
 from racing_lib.config import fast_mode
 from racing_lib.errors import RacingLibError
 from racing_lib.experiments.ablation.keys import (
-    _code_digests,
-    _compact_json,
-    _digest,
-    _plan_key_inputs,
-    _row_key_inputs,
+    code_digests,
+    compact_json,
+    digest,
+    plan_key_inputs,
+    row_key_inputs,
 )
 from racing_lib.experiments.ablation.rows import ablation_rows, format_number
-from racing_lib.experiments.ablation.runner import DEFAULT_OUT, _resolve_tracks, run_ablation
+from racing_lib.experiments.ablation.runner import DEFAULT_OUT, resolve_tracks, run_ablation
 from racing_lib.experiments.configs import (
     tuned_weights,
 )
@@ -31,6 +31,7 @@ from racing_lib.provenance import environment
 
 __all__ = [
     "SHIPPED_TABLE_FILE",
+    "TABLE_FORMAT",
     "format_table",
     "generate_ablation_table",
     "load_table",
@@ -168,9 +169,8 @@ def load_table(path: str | os.PathLike[str]) -> dict[str, Any]:
 def shipped_table_header() -> dict[str, Any]:
     """The shipped table's header.
 
-    The shipped table's header: format, date, trials, wall time and ``provenance`` (the
-    machine, BLAS kernel and package versions that made it, see
-    :func:`racing_lib.provenance.environment`).
+    Format, date, trials, wall time and ``provenance`` (the machine, BLAS kernel and package
+    versions that made it, see :func:`racing_lib.provenance.environment`).
     """
     data = _read_shipped()
     return {k: v for k, v in data.items() if k != "rows"}
@@ -211,20 +211,20 @@ def stale_rows(
     plan spacing (the weights, model parameters, track or source code changed since it was made).
     """
     by_name = {r.name: r for r in ablation_rows()}
-    code = _code_digests()
+    code = code_digests()
     stale = []
     for row in rows:
         spec = by_name.get(str(row.get("name")))
         if spec is None:
             stale.append(str(row.get("name")))
             continue
-        trk = _resolve_tracks([spec], tracks)[spec.track]
+        trk = resolve_tracks([spec], tracks)[spec.track]
         spacing = (row.get("plan") or {}).get("spacing_m")
-        plan_key = _digest(_plan_key_inputs(spec, trk, spacing, code))
+        plan_key = digest(plan_key_inputs(spec, trk, spacing, code))
         weights = tuned_weights(spec.config)
-        inputs = _row_key_inputs(spec, trk, plan_key, weights, row["seeds"], code)
+        inputs = row_key_inputs(spec, trk, plan_key, weights, row["seeds"], code)
         inputs["fast_mode"] = bool(row.get("fast_mode", False))  # judge the row on its own terms
-        if _digest(inputs) != row.get("key"):
+        if digest(inputs) != row.get("key"):
             stale.append(spec.name)
     return stale
 
@@ -232,7 +232,7 @@ def stale_rows(
 def _row_digest(row: Mapping[str, Any]) -> str:
     """SHA-256 of a row's JSON (its own ``sha256`` field left out)."""
     return hashlib.sha256(
-        _compact_json({k: v for k, v in row.items() if k != "sha256"}).encode("utf-8")
+        compact_json({k: v for k, v in row.items() if k != "sha256"}).encode("utf-8")
     ).hexdigest()
 
 
@@ -244,7 +244,7 @@ def _table_text(header: Mapping[str, Any], rows: Sequence[Mapping[str, Any]]) ->
     """
     head = ",\n".join(f"{json.dumps(k)}: {json.dumps(v)}" for k, v in sorted(header.items()))
     signed = [{**r, "sha256": _row_digest(r)} for r in rows]
-    body = ",\n".join(_compact_json(r) for r in signed)
+    body = ",\n".join(compact_json(r) for r in signed)
     return "{\n" + head + ',\n"rows": [\n' + body + "\n]\n}\n"
 
 

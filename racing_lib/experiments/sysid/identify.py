@@ -130,7 +130,8 @@ class IdentificationResult:
         missing = sorted(set(tol) - set(err))
         if missing:
             raise ModelError(
-                f"no true value for {missing}: pass truth=VehicleParams(...) to identify()."
+                f"no true value for {missing}: pass truth=VehicleParams(...) or "
+                "truth=ModelParams(...) to identify()."
             )
         return {k: abs(err[k]) <= t for k, t in tol.items()}
 

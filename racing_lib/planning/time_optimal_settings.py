@@ -1,0 +1,148 @@
+"""The minimum-lap-time NLP's settings and the result it returns."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from racing_lib.planning.curvature import (
+    DEFAULT_CAR_WIDTH,
+    TrackGrid,
+)
+from racing_lib.planning.trajectory import Trajectory
+
+__all__ = ["TimeOptimalResult", "TimeOptimalSettings"]
+
+
+@dataclass(frozen=True)
+class TimeOptimalSettings:
+    """Settings of the minimum-lap-time NLP.
+
+    Attributes
+    ----------
+    spacing : float
+        Node spacing along the centerline, m.
+    w_ddelta : float
+        Weight of the steering-rate regularization ``sum_k ((delta_{k+1} - delta_k) / ds_k)^2 ds_k``
+        (rad^2/m), in seconds per rad^2/m.
+    max_iter : int
+        IPOPT iteration limit per solve.
+    tol : float
+        IPOPT convergence tolerance (on the scaled problem).
+    car_width : float
+        Body width, m.
+    margin : float or None
+        Clearance to the track edge, m (None: 0.8 with walls, 0.3 open).
+    delta_max : float
+        Steering angle bound, rad.
+    v_min : float
+        Lower bound on v_x, m/s (keeps the lap-time integrand finite).
+    e_psi_max : float
+        Bound on the heading error to the centerline, rad.
+    slip_limit : bool
+        Bound the slip angles on the rising side of the tyre curves (below the Pacejka peak).
+    slip_force_share : float
+        The bound is the slip angle where the tyre force reaches this share of its peak
+        (:meth:`racing_lib.model.ModelParams.slip_angle_at`; 1 = the peak itself). The identified
+        curves are broad (C about 1.2): at the peak the rear slips 7.7 degrees, and plans used
+        it to rotate the car into corners while braking at the limit, a drift the car's tyres,
+        which lose lateral grip when they brake, cannot hold (Oschersleben: 32 s off the track).
+        95 % of the peak force comes at about half that slip.
+    friction_ellipse : bool
+        Couple a_x and a_y through the friction ellipse.
+    drive_axle_circle : bool
+        Keep the drive force and the rear lateral force inside the rear tyres' friction circle
+        (the car is rear-wheel driven): without it the plan accelerates out of corners harder
+        than the car's traction control allows.
+    pedal_limits : {"iterate", "exact"}
+        How the state-dependent a_x limits are imposed (see the module docstring).
+    max_outer : int
+        Maximum number of solves with updated a_x limits ("iterate").
+    outer_tol : float
+        The a_x limits have settled when they move less than this, m/s^2.
+    v_top : float or None
+        Top speed (upper bound on v_x), m/s (None: 190 km/h).
+    print_level : int
+        IPOPT's print level (0 silent).
+    graph : {"sx", "mx"}
+        CasADi graph of the whole problem. Expressway, 1,464 nodes, cold start (26 iterations):
+        "sx" builds in 13 s and solves in 1.8 s (0.07 s per iteration); "mx" builds in 0.7 s and
+        solves in 6.8 s (0.26 s per iteration). "sx" pays off when a built problem is solved
+        again (cache) or needs many iterations (warm start: about 100); "mx" for one cold solve.
+    mu_min : float
+        Smallest friction coefficient accepted (ice is about 0.1); below it the parameters are
+        taken for a mistake and :class:`PlanningError` is raised before solving.
+    ipopt_options : tuple of (name, value)
+        Extra IPOPT options, e.g. ``(("mu_init", 1e-3),)`` (a tuple so the settings stay hashable).
+    """
+
+    spacing: float = 3.0
+    w_ddelta: float = 1.0
+    max_iter: int = 1000
+    tol: float = 1e-6
+    car_width: float = DEFAULT_CAR_WIDTH
+    margin: float | None = None
+    delta_max: float = 0.5
+    v_min: float = 3.0
+    e_psi_max: float = 1.0
+    slip_limit: bool = True
+    slip_force_share: float = 0.95
+    friction_ellipse: bool = True
+    drive_axle_circle: bool = True
+    pedal_limits: str = "exact"
+    max_outer: int = 4
+    outer_tol: float = 0.05
+    v_top: float | None = None
+    print_level: int = 0
+    ipopt_options: tuple[tuple[str, Any], ...] = ()
+    mu_min: float = 0.1
+    graph: str = "sx"
+
+
+@dataclass
+class TimeOptimalResult:
+    """Result of :func:`solve_time_optimal`.
+
+    Attributes
+    ----------
+    success : bool
+        IPOPT converged (``Solve_Succeeded`` or ``Solved_To_Acceptable_Level``) in the last solve
+        and the a_x limits settled.
+    status : str
+        IPOPT's ``return_status`` of the last solve.
+    iterations : int
+        IPOPT iterations, summed over the outer solves.
+    solve_time : float
+        Wall time of the solves, s.
+    build_time : float
+        Wall time to build the CasADi problem (0 when it came from the cache), s.
+    outer_iterations : int
+        Number of solves with updated a_x limits.
+    trajectory : Trajectory or None
+        The plan (None only when no solve produced finite numbers).
+    lap_time : float
+        Planned lap time, s.
+    start : str
+        ``'warm'`` (from the curvature plan), ``'cold'`` (centerline at 10 m/s) or ``'given'``.
+    iterations_per_solve : list of int
+        IPOPT iterations of each outer solve.
+    grid : TrackGrid
+        The planning grid.
+    solution : dict
+        Arrays on the grid: v_x, v_y, r, e_psi, e_y, delta, a_x, dt (the interval times).
+    """
+
+    success: bool
+    status: str
+    iterations: int
+    solve_time: float
+    build_time: float
+    outer_iterations: int
+    trajectory: Trajectory | None
+    lap_time: float
+    start: str
+    iterations_per_solve: list[int] = field(default_factory=list)
+    grid: TrackGrid | None = None
+    solution: dict[str, np.ndarray] = field(default_factory=dict)
