@@ -25,7 +25,8 @@ The QP, on N nodes of the centerline (periodic, a flying lap)::
          |delta_k| <= delta_max
 
 with the lateral state xi = (v_y, r, e_psi, e_y). What made it converge where the paper's weights
-taken literally in SI units did not (see MEASURED.md):
+taken literally in SI units did not (measured on racetrack-database circuits while this planner
+was built):
 
 * **Dimensionless terms.** The curvature r / v_hat (1/m) is multiplied by the wheelbase L, which
   turns it into the kinematic steering angle of the line (rad); the lateral velocity enters as the

@@ -6,7 +6,7 @@ xi = (v_x, v_y, r, e_psi, e_y) and inputs u = (delta, a_x) at N nodes of the cen
 the spatial-domain model of :mod:`racing_lib.model` (:func:`racing_lib.model.spatial_dynamics`),
 for a flying lap (the state at the end of the lap equals the state at its start).
 
-Formulation choices, from the measurements in MEASURED.md:
+Formulation choices, each measured on real circuits before it was adopted:
 
 * **Trapezoidal collocation**: ``xi_{k+1} - xi_k = ds_k / 2 (f(xi_k, u_k) + f(xi_{k+1}, u_{k+1}))``
   with inputs linear between nodes. It is A-stable (explicit steps of 3-5 m are not, at hairpin
