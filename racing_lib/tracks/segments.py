@@ -9,6 +9,7 @@ with steps of at most 0.1 m).
 
 Closing the loop. A closed track must turn by exactly +-360 degrees (or by 0 degrees: a
 figure-eight, whose two lobes turn opposite ways) and end where it starts.
+
 * Heading: if the arc angles sum to +-360 (or 0) degrees within ``angle_tolerance``, every arc
   angle is scaled by the same factor so that the sum is exact (arcs keep their radii); for a
   figure-eight only the arcs of one turning direction are scaled.
@@ -17,6 +18,7 @@ figure-eight, whose two lobes turn opposite ways) and end where it starts.
   minimize sum (dL_i / L_i)^2 subject to sum dL_i (cos theta_i, sin theta_i) = -e (least squares,
   long straights absorb more). Two non-parallel straights are enough. Without them the gap is
   spread linearly over s (r(s) -= e s / L), a correction of second order for small gaps.
+
 The corrections are reported in :attr:`Centerline.closure` so a layout author can see that they
 are small and fold them back into the layout.
 
