@@ -67,6 +67,8 @@ from racing_lib.planning.time_optimal_settings import TimeOptimalResult, TimeOpt
 from racing_lib.planning.trajectory import Trajectory, default_model_inputs
 
 __all__ = [
+    "TimeOptimalResult",
+    "TimeOptimalSettings",
     "clear_cache",
     "lap_time_with_model",
     "solve_time_optimal",
