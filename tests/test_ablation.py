@@ -303,6 +303,20 @@ def test_generate_writes_a_table_that_loads_back(table, tracks, tmp_path, monkey
     assert stale_rows(data["rows"], tracks=tracks) == ALL_ROWS  # every row's weights changed
 
 
+def test_the_shipped_table_was_made_by_the_code_it_ships_with():
+    """Every shipped row's cache key matches the current code, weights and data.
+
+    A change of the planner, the controllers, the car or the runner changes the keys: the table must
+    then be regenerated (``generate_ablation_table(workers=2)`` on an idle machine, about 7 min),
+    or chapter 07 would show numbers the code no longer makes.
+    """
+    stale = stale_rows(shipped_table())
+    assert not stale, (
+        f"the shipped ablation table is stale for rows {stale}; regenerate it with "
+        "racing_lib.experiments.ablation.generate_ablation_table(workers=2)"
+    )
+
+
 def test_the_shipped_table_is_full_and_small_or_says_how_to_make_it():
     path = ablation_table._shipped_path()
     if not path.exists():
