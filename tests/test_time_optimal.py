@@ -126,8 +126,9 @@ def test_paper_pedal_limit_iteration_agrees_with_exact_limits(oval, nlp):
     assert res.lap_time == pytest.approx(nlp.lap_time, abs=0.05)
 
 
-def test_mx_graph_gives_the_same_plan(oval, nlp):
-    settings = TimeOptimalSettings(spacing=2.5, graph="mx")
+@pytest.mark.parametrize("graph", ["sx", "mx"])
+def test_casadis_own_derivatives_give_the_same_plan(oval, nlp, graph):
+    settings = TimeOptimalSettings(spacing=2.5, graph=graph)
     res = solve_time_optimal(oval, PARAMS, OPTIONS, settings, start="cold")
     assert res.success, res.status
     assert res.lap_time == pytest.approx(nlp.lap_time, abs=0.01)

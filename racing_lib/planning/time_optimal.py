@@ -11,11 +11,12 @@ Formulation choices, each measured on real circuits before it was adopted:
 * **Trapezoidal collocation**: ``xi_{k+1} - xi_k = ds_k / 2 (f(xi_k, u_k) + f(xi_{k+1}, u_{k+1}))``
   with inputs linear between nodes. It is A-stable (explicit steps of 3-5 m are not, at hairpin
   speeds) and cheap to build. With it the paper's "cold start fails" does not reproduce: on a 3 m
-  grid a cold start (centerline, 10 m/s) converged in 26-41 IPOPT iterations on the two built-in
-  tracks and four real circuits, a warm start from the curvature QP in 75-134, to the same lap
-  time (within 0.002 s); probably because the warm start sits on many active constraints (track
-  edges, tyre peaks), where an interior-point method starts badly (a lower ``mu_init`` did not
-  help).
+  grid a cold start (centerline, 10 m/s) converges as well as the warm start from the curvature
+  QP, to the same lap time.
+* **A starting barrier for a warm start**: the warm start sits on many active constraints (track
+  edges, tyre limits), where IPOPT's defaults made its adaptive barrier collapse and the iterates
+  creep (72-196 iterations on real circuits); a small ``mu_init`` with bound multipliers
+  ``mu / slack`` (:data:`STARTING_BARRIER`) brought it to 26-51, level with the cold start.
 * **Tyres below their peak**: |alpha_f|, |alpha_r| <= the slip angle where the Pacejka force
   reaches 95 % of its peak (``slip_force_share``,
   :meth:`racing_lib.model.ModelParams.slip_angle_at`). Past the peak the optimum is degenerate
@@ -23,7 +24,7 @@ Formulation choices, each measured on real circuits before it was adopted:
   corners under braking, which the car cannot do.
 * **Everything scaled to order one**: each variable is divided by a typical magnitude and each
   dynamics defect by the scale of its state; the objective by a reference lap time.
-* **Exact Hessian** (CasADi's algorithmic differentiation of an SX graph).
+* **Exact Hessian**, assembled from the symbolic Hessian of one interval (CasADi SX).
 * **Combined slip**: the tyres' longitudinal acceleration ``a_x - F_yf sin(delta) / m`` and the
   lateral acceleration a_y share the friction ellipse ``(a_long / a_brake)^2 + (a_y / a_peak)^2
   <= 1`` (``friction_ellipse``; ``a_peak`` is the
@@ -41,8 +42,9 @@ Formulation choices, each measured on real circuits before it was adopted:
   took 25 IPOPT iterations; "iterate" took 3-4 solves of 40-75 iterations each, because every
   re-solve restarts IPOPT's barrier.
 
-The CasADi problem is built once per (track grid, parameters, options, settings) and kept in a small
-cache; building costs seconds, more than a warm solve.
+The NLP is assembled from the functions of one interval, differentiated once per parameter set
+(:mod:`racing_lib.planning.time_optimal_nlp`), so building it for a new track takes a tenth of a
+second; built problems are also kept in a small cache.
 """
 
 from __future__ import annotations
@@ -63,6 +65,13 @@ from racing_lib.planning.curvature import (
     steady_cornering,
 )
 from racing_lib.planning.speed import speed_profile
+from racing_lib.planning.time_optimal_nlp import (
+    NLP_SCALE,
+    NLP_VARS,
+    NXS,
+    StructuredNLP,
+    interval_functions,
+)
 from racing_lib.planning.time_optimal_settings import TimeOptimalResult, TimeOptimalSettings
 from racing_lib.planning.trajectory import Trajectory, default_model_inputs
 
@@ -77,124 +86,53 @@ __all__ = [
 if TYPE_CHECKING:
     from racing_lib.model.params import ModelParams
 
-# Variables per node, in this order, with their typical magnitudes (for scaling).
-_VARS = ("VX", "VY", "R", "EPSI", "EY", "DELTA", "AX")
-_SCALE = np.array([30.0, 1.0, 0.5, 0.2, 5.0, 0.1, 5.0])
-_NXS = 5  # states in the NLP (s is the grid itself)
+_VARS = NLP_VARS
+_SCALE = NLP_SCALE
+_NXS = NXS
+
+
+#: IPOPT options of the NLP's first iterate: a small barrier parameter and bound multipliers
+#: ``mu / slack``. With IPOPT's defaults (mu_init 0.1, multipliers 1) the adaptive barrier fell
+#: to 1e-7 within a few iterations of the warm start, which sits on many active constraints, and
+#: then crept along in short steps: 72-196 iterations on the ten real circuits against 33-60 cold.
+#: Measured on those ten and the two built-in tracks: warm 26-51, cold 23-45 iterations, to the
+#: same lap times (benchmarks/bench_warm_start.py).
+STARTING_BARRIER: tuple[tuple[str, Any], ...] = (
+    ("mu_init", 1e-4),
+    ("bound_mult_init_method", "mu-based"),
+)
+
+
+def _shape_settings(st: TimeOptimalSettings) -> TimeOptimalSettings:
+    """The settings reduced to the fields that shape one interval's functions.
+
+    The others are reset to their defaults, so that settings that differ only in solver options,
+    grid or bounds share one cached set of interval functions.
+    """
+    shaping = ("w_ddelta", "slip_limit", "slip_force_share", "friction_ellipse")
+    shaping += ("drive_axle_circle", "pedal_limits")
+    return TimeOptimalSettings(**{name: getattr(st, name) for name in shaping})
 
 
 class _Problem:
     """The built NLP for one grid, parameter set, options and settings."""
 
-    # long function: the NLP's variables, dynamics, bounds and cost, built in the order the paper
-    #   states them
     def __init__(
         self, grid: TrackGrid, params: ModelParams, options: Any, st: TimeOptimalSettings
     ) -> None:
-        import casadi as ca
-
-        from racing_lib.model import NU, NX, U, X, model_terms, spatial_dynamics
-
         t0 = time.perf_counter()
-        n = grid.n
-        self.n = n
+        self.n = grid.n
         self.grid = grid
         self.params = params
         self.settings = st
-        rows = {name: i for i, name in enumerate(_VARS)}
-
-        # One node, in SX: dynamics dxi/ds, path constraints and 1/s_dot (the lap-time integrand).
-        w = ca.SX.sym("w", len(_VARS))  # scaled variables of the node
-        kap_k, th_k, s_k = ca.SX.sym("kappa"), ca.SX.sym("theta"), ca.SX.sym("s")
-        z = w * ca.DM(_SCALE)
-        xi = ca.SX(NX, 1)  # the model's state and input, filled by name
-        for name in _VARS[:_NXS]:
-            xi[int(X[name])] = z[rows[name]]
-        xi[int(X.S)] = s_k
-        u = ca.SX(NU, 1)
-        u[int(U.DELTA)] = z[rows["DELTA"]]
-        u[int(U.AX)] = z[rows["AX"]]
-        f_all = spatial_dynamics(params, options)(xi, u, kap_k, th_k)
-        f = ca.vertcat(*[f_all[int(X[name])] for name in _VARS[:_NXS]])
-        terms_fn = model_terms(params, options)
-        terms = dict(zip(terms_fn.name_out(), terms_fn(xi, u, kap_k, th_k), strict=True))
-        path, lb_path, ub_path = [], [], []
-        if st.slip_limit:
-            a_f, a_r = params.slip_angle_at(st.slip_force_share)
-            path += [terms["alpha_f"] / a_f, terms["alpha_r"] / a_r]
-            lb_path += [-1.0, -1.0]
-            ub_path += [1.0, 1.0]
-        if st.friction_ellipse:
-            grip = params.peak_acceleration()
-            grip_x = min(grip, params.pedal.full_brake())  # the g-g diagram's braking axis
-            # The tyres' whole longitudinal force, a_x less the steered front tyre's lateral force
-            # along the car (Eq. 5): with a_x alone in the ellipse the optimum braked beyond it by
-            # scrubbing, a steering zig-zag in the braking zones that the car cannot follow.
-            a_long = z[rows["AX"]] - terms["F_yf"] * ca.sin(u[int(U.DELTA)]) / params.m
-            path.append((a_long / grip_x) ** 2 + (terms["a_y"] / grip) ** 2)
-            lb_path.append(-np.inf)
-            ub_path.append(1.0)
-        if st.drive_axle_circle:
-            # Rear-wheel drive: the rear tyres alone carry the drive force, on top of their
-            # share of the cornering force, inside their own friction circle.
-            f_rear = params.mu * params.D_r * terms["F_zr"]
-            f_drive = params.m * ca.fmax(z[rows["AX"]], 0.0)
-            path.append((f_drive**2 + terms["F_yr"] ** 2) / f_rear**2)
-            lb_path.append(-np.inf)
-            ub_path.append(1.0)
-        if st.pedal_limits == "exact":
-            pedal = params.pedal
-            base = pedal.m_0 + ca.dot(ca.DM(pedal.m_xi), xi)
-            path.append((z[rows["AX"]] - base) / 5.0)
-            lb_path.append(-pedal.full_brake() / 5.0)
-            ub_path.append(pedal.m_thr / 5.0)
-            if pedal.p_thr is not None:
-                # The power limit as a smooth product (throttle power per unit mass), not a min().
-                path.append((z[rows["AX"]] - base) * xi[int(X.VX)] / pedal.p_thr)
-                lb_path.append(-np.inf)
-                ub_path.append(1.0)
-        elif st.pedal_limits != "iterate":
-            raise PlanningError(
-                f"unknown pedal_limits {st.pedal_limits!r}; use 'iterate' or 'exact'."
-            )
-        node_fn = ca.Function(
-            "node", [w, kap_k, th_k, s_k], [f, ca.vertcat(*path), 1.0 / terms["s_dot"]]
-        )
-
-        # The whole lap over the mapped node function. With SX the map is inlined into one flat
-        # graph (slow to build, fast to evaluate); with MX CasADi differentiates the map node by
-        # node (fast to build, slower to evaluate). See TimeOptimalSettings.graph.
-        if st.graph not in ("sx", "mx"):
-            raise PlanningError(f"unknown graph {st.graph!r}; use 'sx' or 'mx'.")
-        W = (ca.SX if st.graph == "sx" else ca.MX).sym("w", len(_VARS), n)
-        F, P, inv_sdot = node_fn.map(n)(
-            W, ca.DM(grid.kappa).T, ca.DM(grid.theta).T, ca.DM(grid.s).T
-        )
-        nxt = list(range(1, n)) + [0]
-        h = ca.DM(grid.ds).T
-        xs = W[0:_NXS, :]  # scaled states
-        inv_scale = ca.DM(1.0 / _SCALE[:_NXS])
-        # Trapezoidal collocation defects in scaled units (each divided by its state's scale).
-        defect = (
-            xs[:, nxt]
-            - xs
-            - 0.5 * ca.repmat(h, _NXS, 1) * (F + F[:, nxt]) * ca.repmat(inv_scale, 1, n)
-        )
-        g_list = [ca.vec(defect), ca.vec(P)]
-        lbg = [np.zeros(_NXS * n), np.tile(lb_path, n)]
-        ubg = [np.zeros(_NXS * n), np.tile(ub_path, n)]
-        # Objective: lap time (trapezoid in 1/s_dot) + steering-rate regularization, over T_ref.
-        lap = trapezoid_lap_time(inv_sdot, grid)
-        delta = W[rows["DELTA"], :] * _SCALE[rows["DELTA"]]
-        dd = delta[:, nxt] - delta
-        reg = ca.sum2(dd**2 / h)
+        fns = interval_functions(params, options, _shape_settings(st))
         self.t_ref = float(grid.length / 20.0)
-        obj = (lap + st.w_ddelta * reg) / self.t_ref
-        nlp = {"x": ca.vec(W), "f": obj, "g": ca.vertcat(*g_list)}
-        self.solver = ipopt_solver("time_optimal", nlp, st)
-        self.lbg = np.concatenate(lbg)
-        self.ubg = np.concatenate(ubg)
-        self.lap_fn = ca.Function("lap", [ca.vec(W)], [lap, 1.0 / inv_sdot])
+        nlp = StructuredNLP(fns, grid.kappa, grid.theta, grid.s, grid.ds, self.t_ref, st.graph)
+        self.solver = ipopt_solver(
+            "time_optimal", nlp.nlp, st, nlp.derivatives, defaults=STARTING_BARRIER
+        )
+        self.lbg, self.ubg = nlp.lbg, nlp.ubg
+        self.lap_fn = nlp.lap_fn
         self.build_time = time.perf_counter() - t0
 
     def bounds(self, ax_lo: np.ndarray, ax_hi: np.ndarray, v_top: float) -> tuple[Any, Any]:
@@ -318,12 +256,21 @@ def trapezoid_lap_time(inv_sdot: Any, grid: Any) -> Any:
     return ca.mtimes(inv_sdot, ca.DM(w_node))
 
 
-def ipopt_solver(name: str, nlp: dict[str, Any], st: Any) -> Any:
+def ipopt_solver(
+    name: str,
+    nlp: dict[str, Any],
+    st: Any,
+    derivatives: dict[str, Any] | None = None,
+    defaults: tuple[tuple[str, Any], ...] = (),
+) -> Any:
     """CasADi's IPOPT ``nlpsol`` for ``nlp`` with the planners' options.
 
     The exact Hessian (CasADi differentiates the model symbolically, so it costs little) and the
     adaptive barrier update; ``st`` supplies ``print_level``, ``max_iter``, ``tol`` and any
-    ``ipopt_options`` that override these. Shared with :mod:`racing_lib.planning.best_lap`.
+    ``ipopt_options`` that override these. ``derivatives`` may hold ready-made ``grad_f``,
+    ``jac_g`` and ``hess_lag`` functions (:class:`~racing_lib.planning.time_optimal_nlp.
+    StructuredNLP`); ``defaults`` are IPOPT options of the caller, applied before
+    ``st.ipopt_options``. Shared with :mod:`racing_lib.planning.best_lap`.
     """
     import casadi as ca
 
@@ -335,8 +282,10 @@ def ipopt_solver(name: str, nlp: dict[str, Any], st: Any) -> Any:
         "mu_strategy": "adaptive",
         "sb": "yes",
     }
+    ipopt.update(dict(defaults))
     ipopt.update(dict(st.ipopt_options))
-    return ca.nlpsol(name, "ipopt", nlp, {"ipopt": ipopt, "print_time": False})
+    opts = {"ipopt": ipopt, "print_time": False, **(derivatives or {})}
+    return ca.nlpsol(name, "ipopt", nlp, opts)
 
 
 # long function: the NLP's set-up, solve and fallbacks, read against the paper's formulation in one

@@ -66,11 +66,13 @@ class TimeOptimalSettings:
         Top speed (upper bound on v_x), m/s (None: 190 km/h).
     print_level : int
         IPOPT's print level (0 silent).
-    graph : {"sx", "mx"}
-        CasADi graph of the whole problem. Expressway, 1,464 nodes, cold start (26 iterations):
-        "sx" builds in 13 s and solves in 1.8 s (0.07 s per iteration); "mx" builds in 0.7 s and
-        solves in 6.8 s (0.26 s per iteration). "sx" pays off when a built problem is solved
-        again (cache) or needs many iterations (warm start: about 100); "mx" for one cold solve.
+    graph : {"structured", "sx", "mx"}
+        How the NLP and its derivatives are built. ``"structured"`` (default): one interval's
+        functions are differentiated symbolically and mapped over the grid
+        (:mod:`racing_lib.planning.time_optimal_nlp`); expressway, 1,464 nodes: built in 0.1 s.
+        ``"sx"``: the whole lap as one SX graph that CasADi differentiates (6-9 s to build there,
+        the same iterations); ``"mx"``: an MX graph over the mapped node function (fast to build,
+        several times slower per iteration). Both are kept to check the structured derivatives.
     mu_min : float
         Smallest friction coefficient accepted (ice is about 0.1); below it the parameters are
         taken for a mistake and :class:`PlanningError` is raised before solving.
@@ -98,7 +100,7 @@ class TimeOptimalSettings:
     print_level: int = 0
     ipopt_options: tuple[tuple[str, Any], ...] = ()
     mu_min: float = 0.1
-    graph: str = "sx"
+    graph: str = "structured"
 
 
 @dataclass

@@ -1,0 +1,135 @@
+"""How fast the time-optimal plan is: the default against the previous default, warm against cold.
+
+For each track, ``plan(track, "time-optimal")`` is run as a user runs it (curvature QP, NLP build
+and solve, nothing cached from an earlier track) in three ways:
+
+* ``previous``: the NLP as it was before the structured build: one flat CasADi SX graph
+  differentiated by CasADi (``graph="sx"``) and IPOPT's own starting point (``mu_init`` 0.1,
+  bound multipliers 1), warm-started from the QP;
+* ``warm``: the default (structured NLP, :data:`~racing_lib.planning.time_optimal.
+  STARTING_BARRIER`), warm-started from the QP;
+* ``cold``: the default from the centerline at 10 m/s.
+
+Per track it prints IPOPT iterations, the build time, the wall time of the whole call (median
+over ``--repeats``) and the planned lap time of each; then the medians over tracks of the ratios
+that matter: previous/new wall time and iterations, warm/cold iterations, and the largest
+lap-time difference between the three. Times are this machine's; never run inside the tests.
+
+Usage::
+
+    python benchmarks/bench_plan_speed.py                           # the built-in tracks
+    python benchmarks/bench_plan_speed.py TRACKS_DIR --repeats 3    # plus every *.csv there
+    python benchmarks/bench_plan_speed.py TRACKS_DIR --only Monza Spa --skip-previous
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import time
+import warnings
+from pathlib import Path
+
+from racing_lib.planning import TimeOptimalSettings, plan
+from racing_lib.planning.time_optimal import clear_cache
+from racing_lib.planning.time_optimal_nlp import interval_functions
+from racing_lib.tracks import builtin_track_names, load_track
+
+#: The defaults before the structured NLP (both options are IPOPT's own defaults).
+PREVIOUS = TimeOptimalSettings(
+    graph="sx", ipopt_options=(("mu_init", 0.1), ("bound_mult_init_method", "constant"))
+)
+WAYS = {
+    "previous": (PREVIOUS, "warm"),
+    "warm": (TimeOptimalSettings(), "warm"),
+    "cold": (TimeOptimalSettings(), "cold"),
+}
+
+
+def run_once(track, settings: TimeOptimalSettings, start: str) -> dict:
+    """One plan from nothing cached: iterations, build and wall time (s), lap time (s)."""
+    clear_cache()
+    interval_functions.cache_clear()
+    t0 = time.perf_counter()
+    res = plan(track, "time-optimal", start=start, time_optimal_settings=settings)
+    wall = time.perf_counter() - t0
+    nlp = res.details
+    return {
+        "iterations": int(res.iterations),
+        "build_s": float(nlp.build_time),
+        "solve_s": float(nlp.solve_time),
+        "wall_s": wall,
+        "lap_s": float(nlp.lap_time),
+        "status": res.status,
+    }
+
+
+def bench_track(track, ways: list[str], repeats: int) -> dict[str, dict]:
+    """Each way's result on one track, wall times the median of ``repeats`` runs."""
+    out = {}
+    for way in ways:
+        settings, start = WAYS[way]
+        runs = [run_once(track, settings, start) for _ in range(repeats)]
+        row = dict(runs[0])
+        row["wall_s"] = statistics.median(r["wall_s"] for r in runs)
+        row["solve_s"] = statistics.median(r["solve_s"] for r in runs)
+        row["build_s"] = statistics.median(r["build_s"] for r in runs)
+        out[way] = row
+    return out
+
+
+def main() -> None:
+    """Command-line entry point."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("tracks_dir", nargs="?", help="folder of racetrack-database CSV files")
+    parser.add_argument("--only", nargs="*", help="track names to keep")
+    parser.add_argument("--repeats", type=int, default=1)
+    parser.add_argument("--skip-previous", action="store_true", help="skip the slow old default")
+    args = parser.parse_args()
+    warnings.filterwarnings("ignore")
+    sources: list[str | Path] = list(builtin_track_names())
+    if args.tracks_dir:
+        sources += sorted(Path(args.tracks_dir).glob("*.csv"))
+    ways = [w for w in WAYS if not (args.skip_previous and w == "previous")]
+    header = f"{'track':13s} {'km':>5s}"
+    for way in ways:
+        header += f" | {way + ' it':>12s} {'build':>6s} {'wall':>6s} {'lap':>8s}"
+    print(header)
+    rows = {}
+    for src in sources:
+        track = load_track(src)
+        if args.only and track.name not in args.only:
+            continue
+        row = bench_track(track, ways, args.repeats)
+        rows[track.name] = row
+        line = f"{track.name:13s} {track.length / 1000:5.2f}"
+        for way in ways:
+            r = row[way]
+            line += (
+                f" | {r['iterations']:12d} {r['build_s']:6.2f} {r['wall_s']:6.1f} {r['lap_s']:8.3f}"
+            )
+        print(line, flush=True)
+    if not rows:
+        return
+    med = statistics.median
+    warm_cold = med(r["warm"]["iterations"] / r["cold"]["iterations"] for r in rows.values())
+    worst_wall = max(r["warm"]["wall_s"] for r in rows.values())
+    worst_it = max(r["warm"]["iterations"] for r in rows.values())
+    lost = [name for name, r in rows.items() if r["warm"]["iterations"] > r["cold"]["iterations"]]
+    print(f"\nwarm start, worst track: {worst_it} iterations, {worst_wall:.1f} s wall")
+    print(f"median warm/cold iterations: {warm_cold:.2f}; warm needed more on {lost or 'none'}")
+    if "previous" in ways:
+        wall = med(r["previous"]["wall_s"] / r["warm"]["wall_s"] for r in rows.values())
+        its = med(r["previous"]["iterations"] / r["warm"]["iterations"] for r in rows.values())
+        build = med(r["previous"]["build_s"] / r["warm"]["build_s"] for r in rows.values())
+        print(f"median previous/new: wall {wall:.1f}x, iterations {its:.1f}x, build {build:.0f}x")
+    gap = max(
+        abs(r[a]["lap_s"] - r["warm"]["lap_s"]) / r["warm"]["lap_s"]
+        for r in rows.values()
+        for a in ways
+    )
+    print(f"largest planned-lap difference between the ways: {100 * gap:.4f} %")
+
+
+if __name__ == "__main__":
+    main()

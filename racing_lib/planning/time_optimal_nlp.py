@@ -1,0 +1,348 @@
+"""The minimum-lap-time NLP, assembled from the functions of one interval of the grid.
+
+Every term of the NLP of :mod:`racing_lib.planning.time_optimal` couples at most two neighbouring
+nodes: the trapezoidal defect of interval k joins nodes k and k + 1, the path constraints touch
+node k alone, and the lap time and the steering-rate penalty are sums over the intervals. So the
+Lagrangian is a sum of interval terms ``L_k(w_k, w_{k+1})``, and its derivatives are sums of
+small blocks:
+
+* one interval's constraints, their Jacobian (with respect to the 14 variables of its two nodes),
+  its objective and gradient, and the Hessian of its Lagrangian are CasADi SX functions of about
+  a dozen inputs, differentiated once per parameter set, options and settings
+  (:class:`IntervalFunctions`, cached);
+* a grid of N nodes maps them over its N intervals (``Function.map``) and scatters the blocks into
+  the global sparse Jacobian and upper-triangular Hessian with constant index maps
+  (:class:`StructuredNLP`), which IPOPT receives as CasADi's ``jac_g``, ``grad_f`` and
+  ``hess_lag``.
+
+Why not let CasADi differentiate the whole lap: with one flat SX graph of 1,464 nodes its symbolic
+Hessian took 6.3 s to build (expressway), more than the solve, and had to be rebuilt for every
+track; an MX graph over the mapped node function builds fast but evaluated its derivatives about
+four times slower per iteration. Here the symbolic work is done on one interval (tens of
+milliseconds, the same for every track), and the track enters only as data: curvature, grade, arc
+length and interval lengths are inputs of the mapped functions. The values are those of the flat
+graph up to round-off.
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from racing_lib.errors import PlanningError
+
+__all__ = ["IntervalFunctions", "StructuredNLP", "interval_functions", "NLP_VARS", "NLP_SCALE"]
+
+# Variables per node, in this order, with their typical magnitudes (for scaling).
+NLP_VARS = ("VX", "VY", "R", "EPSI", "EY", "DELTA", "AX")
+NLP_SCALE = np.array([30.0, 1.0, 0.5, 0.2, 5.0, 0.1, 5.0])
+NXS = 5  # states in the NLP (s is the grid itself)
+_NW = len(NLP_VARS)
+_ROWS = {name: i for i, name in enumerate(NLP_VARS)}
+
+
+@dataclass(frozen=True)
+class IntervalFunctions:
+    """One interval's NLP functions, for one parameter set, options and settings.
+
+    Every function takes ``(w_a, w_b, d_a, d_b, h)``: the scaled variables of the interval's two
+    nodes (7 each, in :data:`NLP_VARS` order), their track data ``(kappa, theta, s)`` (1/m, rad,
+    m) and the interval's length h (m); ``hess`` also takes the objective's weight and the
+    constraint multipliers.
+
+    Attributes
+    ----------
+    con : casadi.Function
+        The interval's constraints: the 5 scaled trapezoidal defects, then node a's path
+        constraints.
+    con_jac : casadi.Function
+        Nonzeros of the constraints' Jacobian with respect to ``(w_a, w_b)``, in the order of
+        ``jac_sparsity``.
+    obj : casadi.Function
+        The interval's lap time (trapezoid in 1/s_dot, s) plus its steering-rate penalty.
+    obj_grad : casadi.Function
+        Gradient of ``obj`` with respect to ``(w_a, w_b)`` (14).
+    hess : casadi.Function
+        Nonzeros of the Hessian of ``sigma obj + lam . con`` with respect to ``(w_a, w_b)``, in
+        the order of ``hess_sparsity``.
+    inv_sdot : casadi.Function
+        One node's ``1 / s_dot`` (s/m) from ``(w, d)``.
+    jac_sparsity, hess_sparsity : casadi.Sparsity
+        Structure of the interval's Jacobian ((5 + n_path) x 14) and Hessian (14 x 14).
+    lb_path, ub_path : numpy.ndarray
+        Bounds of one node's path constraints.
+    """
+
+    con: Any
+    con_jac: Any
+    obj: Any
+    obj_grad: Any
+    hess: Any
+    inv_sdot: Any
+    jac_sparsity: Any
+    hess_sparsity: Any
+    lb_path: np.ndarray
+    ub_path: np.ndarray
+
+    @property
+    def n_con(self) -> int:
+        """Constraints per interval (defects and path constraints)."""
+        return NXS + len(self.lb_path)
+
+
+def _path_constraints(params: Any, st: Any, z: Any, xi: Any, u: Any, terms: dict) -> tuple:
+    """One node's path constraints (CasADi expressions) and their bounds, in scaled form."""
+    import casadi as ca
+
+    from racing_lib.model import U, X
+
+    path, lb, ub = [], [], []
+    if st.slip_limit:
+        a_f, a_r = params.slip_angle_at(st.slip_force_share)
+        path += [terms["alpha_f"] / a_f, terms["alpha_r"] / a_r]
+        lb += [-1.0, -1.0]
+        ub += [1.0, 1.0]
+    if st.friction_ellipse:
+        grip = params.peak_acceleration()
+        grip_x = min(grip, params.pedal.full_brake())  # the g-g diagram's braking axis
+        # The tyres' whole longitudinal force, a_x less the steered front tyre's lateral force
+        # along the car (Eq. 5): with a_x alone in the ellipse the optimum braked beyond it by
+        # scrubbing, a steering zig-zag in the braking zones that the car cannot follow.
+        a_long = z[_ROWS["AX"]] - terms["F_yf"] * ca.sin(u[int(U.DELTA)]) / params.m
+        path.append((a_long / grip_x) ** 2 + (terms["a_y"] / grip) ** 2)
+        lb.append(-np.inf)
+        ub.append(1.0)
+    if st.drive_axle_circle:
+        # Rear-wheel drive: the rear tyres alone carry the drive force, on top of their share of
+        # the cornering force, inside their own friction circle.
+        f_rear = params.mu * params.D_r * terms["F_zr"]
+        f_drive = params.m * ca.fmax(z[_ROWS["AX"]], 0.0)
+        path.append((f_drive**2 + terms["F_yr"] ** 2) / f_rear**2)
+        lb.append(-np.inf)
+        ub.append(1.0)
+    if st.pedal_limits == "exact":
+        pedal = params.pedal
+        base = pedal.m_0 + ca.dot(ca.DM(pedal.m_xi), xi)
+        path.append((z[_ROWS["AX"]] - base) / 5.0)
+        lb.append(-pedal.full_brake() / 5.0)
+        ub.append(pedal.m_thr / 5.0)
+        if pedal.p_thr is not None:
+            # The power limit as a smooth product (throttle power per unit mass), not a min().
+            path.append((z[_ROWS["AX"]] - base) * xi[int(X.VX)] / pedal.p_thr)
+            lb.append(-np.inf)
+            ub.append(1.0)
+    elif st.pedal_limits != "iterate":
+        raise PlanningError(f"unknown pedal_limits {st.pedal_limits!r}; use 'iterate' or 'exact'.")
+    return path, np.array(lb, float), np.array(ub, float)
+
+
+def _node_function(params: Any, options: Any, st: Any) -> tuple[Any, np.ndarray, np.ndarray]:
+    """One node's ``(w, d) -> (dxi/ds of the 5 states, path constraints, 1/s_dot)``."""
+    import casadi as ca
+
+    from racing_lib.model import NU, NX, U, X, model_terms, spatial_dynamics
+
+    w = ca.SX.sym("w", _NW)
+    d = ca.SX.sym("d", 3)  # kappa (1/m), theta (rad), s (m)
+    z = w * ca.DM(NLP_SCALE)
+    xi = ca.SX(NX, 1)  # the model's state and input, filled by name
+    for name in NLP_VARS[:NXS]:
+        xi[int(X[name])] = z[_ROWS[name]]
+    xi[int(X.S)] = d[2]
+    u = ca.SX(NU, 1)
+    u[int(U.DELTA)] = z[_ROWS["DELTA"]]
+    u[int(U.AX)] = z[_ROWS["AX"]]
+    f_all = spatial_dynamics(params, options)(xi, u, d[0], d[1])
+    f = ca.vertcat(*[f_all[int(X[name])] for name in NLP_VARS[:NXS]])
+    terms_fn = model_terms(params, options)
+    terms = dict(zip(terms_fn.name_out(), terms_fn(xi, u, d[0], d[1]), strict=True))
+    path, lb, ub = _path_constraints(params, st, z, xi, u, terms)
+    node = ca.Function("node", [w, d], [f, ca.vertcat(*path), 1.0 / terms["s_dot"]])
+    return node, lb, ub
+
+
+@functools.lru_cache(maxsize=16)
+def interval_functions(params: Any, options: Any, st: Any) -> IntervalFunctions:
+    """The interval functions for a parameter set, options and settings (cached).
+
+    Parameters
+    ----------
+    params : ModelParams
+        Planning model parameters.
+    options : ModelOptions
+        Model effects.
+    st : TimeOptimalSettings
+        The settings that shape the NLP (path constraints, steering-rate weight).
+
+    Returns
+    -------
+    IntervalFunctions
+    """
+    import casadi as ca
+
+    node, lb, ub = _node_function(params, options, st)
+    wa, wb = ca.SX.sym("wa", _NW), ca.SX.sym("wb", _NW)
+    da, db = ca.SX.sym("da", 3), ca.SX.sym("db", 3)
+    h = ca.SX.sym("h")
+    f_a, path_a, q_a = node(wa, da)
+    f_b, _, q_b = node(wb, db)
+    inv_scale = ca.DM(1.0 / NLP_SCALE[:NXS])
+    # Trapezoidal collocation in scaled units (each defect divided by its state's scale).
+    defect = wb[:NXS] - wa[:NXS] - 0.5 * h * (f_a + f_b) * inv_scale
+    con = ca.vertcat(defect, path_a)
+    i_delta = _ROWS["DELTA"]
+    d_delta = (wb[i_delta] - wa[i_delta]) * NLP_SCALE[i_delta]
+    obj = 0.5 * h * (q_a + q_b) + st.w_ddelta * d_delta**2 / h
+    v = ca.vertcat(wa, wb)
+    args = [wa, wb, da, db, h]
+    jac = ca.jacobian(con, v)
+    sigma, lam = ca.SX.sym("sigma"), ca.SX.sym("lam", con.numel())
+    hess = ca.hessian(sigma * obj + ca.dot(lam, con), v)[0]
+    return IntervalFunctions(
+        con=ca.Function("interval_con", args, [con]),
+        con_jac=ca.Function("interval_con_jac", args, [jac.nz[:]]),
+        obj=ca.Function("interval_obj", args, [obj]),
+        obj_grad=ca.Function("interval_obj_grad", args, [ca.gradient(obj, v)]),
+        hess=ca.Function("interval_hess", [*args, sigma, lam], [hess.nz[:]]),
+        inv_sdot=ca.Function("inv_sdot", [wa, da], [q_a]),
+        jac_sparsity=jac.sparsity(),
+        hess_sparsity=hess.sparsity(),
+        lb_path=lb,
+        ub_path=ub,
+    )
+
+
+def _global_index(local: np.ndarray, n: int) -> np.ndarray:
+    """Global variable index of local variable ``local`` (0-13) of every interval, shape (n, m)."""
+    k = np.arange(n)[:, None]
+    node = np.where(local < _NW, k, (k + 1) % n)
+    return _NW * node + local % _NW
+
+
+def _scatter(nrow: int, ncol: int, rows: np.ndarray, cols: np.ndarray) -> tuple[Any, Any]:
+    """The sparsity of a global matrix and the 0/1 matrix that adds triplets into it.
+
+    Triplet t (entry ``rows[t], cols[t]``) is added into its nonzero, so duplicates are summed.
+    """
+    import casadi as ca
+
+    sp, mapping = ca.Sparsity.triplet(nrow, ncol, rows.tolist(), cols.tolist(), True)
+    mapping = np.asarray(mapping, int)
+    gather = ca.DM(
+        ca.Sparsity.triplet(sp.nnz(), len(mapping), mapping.tolist(), list(range(len(mapping)))),
+        1.0,
+    )
+    return sp, gather
+
+
+class StructuredNLP:
+    """The minimum-lap-time NLP of one grid, with derivatives assembled from interval blocks.
+
+    Parameters
+    ----------
+    fns : IntervalFunctions
+        One interval's functions.
+    kappa, theta, s, ds : numpy.ndarray
+        The grid: curvature (1/m), grade (rad), arc length (m) of each node and the length of
+        each interval (m; the last one closes the lap).
+    t_ref : float
+        Reference lap time dividing the objective, s.
+    graph : {"structured", "sx", "mx"}
+        ``"structured"``: the derivatives assembled from the interval blocks; ``"sx"``, ``"mx"``:
+        the whole lap as one graph of that kind, differentiated by CasADi (kept to check and
+        measure the structured one against).
+
+    Attributes
+    ----------
+    nlp : dict
+        CasADi's NLP (``x``, ``f``, ``g``) in MX.
+    derivatives : dict
+        ``grad_f``, ``jac_g`` and ``hess_lag`` for ``nlpsol``'s options.
+    lbg, ubg : numpy.ndarray
+        Constraint bounds, interval by interval.
+    """
+
+    def __init__(
+        self,
+        fns: IntervalFunctions,
+        kappa: np.ndarray,
+        theta: np.ndarray,
+        s: np.ndarray,
+        ds: np.ndarray,
+        t_ref: float,
+        graph: str = "structured",
+    ) -> None:
+        import casadi as ca
+
+        if graph not in ("structured", "sx", "mx"):
+            raise PlanningError(f"unknown graph {graph!r}; use 'structured', 'sx' or 'mx'.")
+        n = len(s)
+        self.n = n
+        nv = _NW * n
+        x = (ca.SX if graph == "sx" else ca.MX).sym("x", nv)
+        w_a = ca.reshape(x, _NW, n)
+        nxt = list(range(1, n)) + [0]
+        data = np.vstack([kappa, theta, s])
+        args = [w_a, w_a[:, nxt], ca.DM(data), ca.DM(data[:, nxt]), ca.DM(ds).T]
+
+        g = ca.vec(fns.con.map(n)(*args))
+        f = ca.sum2(fns.obj.map(n)(*args)) / t_ref
+        self.nlp = {"x": x, "f": f, "g": g}
+        self.lbg = np.tile(np.concatenate([np.zeros(NXS), fns.lb_path]), n)
+        self.ubg = np.tile(np.concatenate([np.zeros(NXS), fns.ub_path]), n)
+        q = fns.inv_sdot.map(n)(w_a, ca.DM(data))
+        lap = ca.mtimes(q, ca.DM(0.5 * (ds + np.roll(ds, 1))))
+        self.lap_fn = ca.Function("lap", [x], [lap, 1.0 / q])
+        self.derivatives: dict[str, Any] = {}
+        if graph == "structured":
+            self.derivatives = self._derivatives(fns, x, args, f, g, t_ref)
+
+    def _derivatives(
+        self, fns: IntervalFunctions, x: Any, args: list, f: Any, g: Any, t_ref: float
+    ) -> dict[str, Any]:
+        """``grad_f``, ``jac_g`` and ``hess_lag`` from the mapped interval blocks."""
+        import casadi as ca
+
+        n, nv, m = self.n, x.numel(), fns.n_con
+        p = ca.MX.sym("p", 0, 1)
+        lam_f, lam_g = ca.MX.sym("lam_f"), ca.MX.sym("lam_g", m * n)
+
+        # Gradient: each interval's 14 entries added into its two nodes.
+        local = np.arange(2 * _NW)
+        grad_idx = _global_index(local, n).ravel()
+        _, grad_gather = _scatter(nv, 1, grad_idx, np.zeros_like(grad_idx))
+        grad = ca.mtimes(grad_gather, ca.vec(fns.obj_grad.map(n)(*args))) / t_ref
+
+        # Jacobian: interval k's rows are k m ... k m + m - 1; every entry lands once.
+        j_rows, j_cols = fns.jac_sparsity.get_triplet()
+        j_rows, j_cols = np.asarray(j_rows), np.asarray(j_cols)
+        rows = (m * np.arange(n)[:, None] + j_rows).ravel()
+        cols = _global_index(j_cols, n).ravel()
+        jac_sp, jac_gather = _scatter(m * n, nv, rows, cols)
+        jac = ca.MX(jac_sp, ca.mtimes(jac_gather, ca.vec(fns.con_jac.map(n)(*args))))
+
+        # Hessian: the upper triangle of the sum of the interval blocks.
+        h_rows, h_cols = fns.hess_sparsity.get_triplet()
+        rows = _global_index(np.asarray(h_rows), n).ravel()
+        cols = _global_index(np.asarray(h_cols), n).ravel()
+        upper = rows <= cols
+        hess_sp, hess_gather = _scatter(nv, nv, rows[upper], cols[upper])
+        keep = np.flatnonzero(upper)
+        lam = ca.reshape(lam_g, m, n)
+        blocks = ca.vec(fns.hess.map(n)(*args, ca.repmat(lam_f / t_ref, 1, n), lam))
+        hess = ca.MX(hess_sp, ca.mtimes(hess_gather, blocks[keep.tolist()]))
+
+        return {
+            "grad_f": ca.Function("grad_f", [x, p], [f, grad], ["x", "p"], ["f", "grad_f_x"]),
+            "jac_g": ca.Function("jac_g", [x, p], [g, jac], ["x", "p"], ["g", "jac_g_x"]),
+            "hess_lag": ca.Function(
+                "hess_lag",
+                [x, p, lam_f, lam_g],
+                [hess],
+                ["x", "p", "lam_f", "lam_g"],
+                ["hess_gamma_x_x"],
+            ),
+        }

@@ -1,0 +1,82 @@
+"""The structured NLP's derivatives against CasADi's own differentiation of the whole lap."""
+
+from __future__ import annotations
+
+import math
+
+import casadi as ca
+import numpy as np
+import pytest
+
+from racing_lib.model import ModelOptions, ModelParams
+from racing_lib.planning.time_optimal import TimeOptimalSettings, _shape_settings
+from racing_lib.planning.time_optimal_nlp import (
+    NLP_SCALE,
+    StructuredNLP,
+    interval_functions,
+)
+
+N = 9  # small enough for dense comparisons, and the last interval wraps round to node 0
+
+
+@pytest.fixture(scope="module", params=[ModelOptions(), ModelOptions(lateral_weight_transfer=True)])
+def pair(request):
+    rng = np.random.default_rng(3)
+    fns = interval_functions(ModelParams(), request.param, _shape_settings(TimeOptimalSettings()))
+    kappa = 0.02 * np.sin(np.linspace(0.0, 2.0 * math.pi, N, endpoint=False))
+    theta = 0.01 * np.cos(np.linspace(0.0, 2.0 * math.pi, N, endpoint=False))
+    ds = rng.uniform(2.5, 3.5, N)
+    s = np.concatenate([[0.0], np.cumsum(ds[:-1])])
+    structured = StructuredNLP(fns, kappa, theta, s, ds, t_ref=5.0)
+    flat = StructuredNLP(fns, kappa, theta, s, ds, t_ref=5.0, graph="sx")
+    # A point away from every singularity: moving forward, moderate slip and steering.
+    z = np.empty((len(NLP_SCALE), N))
+    z[0] = rng.uniform(15.0, 40.0, N)
+    z[1:] = rng.normal(0.0, 0.3, (len(NLP_SCALE) - 1, N)) * NLP_SCALE[1:, None]
+    x = (z / NLP_SCALE[:, None]).ravel(order="F")
+    lam_g = rng.normal(0.0, 1.0, len(structured.lbg))
+    return structured, flat, x, lam_g
+
+
+def test_the_objective_and_constraints_are_the_flat_graphs(pair):
+    structured, flat, x, _ = pair
+    for key in ("f", "g"):
+        mine = ca.Function("a", [structured.nlp["x"]], [structured.nlp[key]])(x)
+        theirs = ca.Function("b", [flat.nlp["x"]], [flat.nlp[key]])(x)
+        np.testing.assert_allclose(np.asarray(mine), np.asarray(theirs), rtol=1e-12, atol=1e-12)
+
+
+def test_the_assembled_gradient_jacobian_and_hessian_equal_casadis(pair):
+    structured, flat, x, lam_g = pair
+    xs, f, g = flat.nlp["x"], flat.nlp["f"], flat.nlp["g"]
+    sigma = 0.7
+    grad_ref = ca.Function("g", [xs], [ca.gradient(f, xs)])(x)
+    jac_ref = ca.Function("j", [xs], [ca.jacobian(g, xs)])(x)
+    hess_ref = ca.Function("h", [xs], [ca.hessian(sigma * f + ca.dot(ca.DM(lam_g), g), xs)[0]])(x)
+
+    der = structured.derivatives
+    _, grad = der["grad_f"](x, [])
+    _, jac = der["jac_g"](x, [])
+    hess = der["hess_lag"](x, [], sigma, lam_g)
+    np.testing.assert_allclose(np.asarray(grad), np.asarray(grad_ref), rtol=1e-10, atol=1e-10)
+    np.testing.assert_allclose(np.asarray(jac), np.asarray(jac_ref), rtol=1e-10, atol=1e-10)
+    # IPOPT is given the upper triangle only; the full matrix is that plus its strict transpose.
+    upper = np.asarray(ca.densify(hess))
+    assert np.allclose(np.tril(upper, -1), 0.0)
+    full = upper + np.triu(upper, 1).T
+    np.testing.assert_allclose(full, np.asarray(hess_ref), rtol=1e-9, atol=1e-9)
+    # Every node is coupled to its neighbours only (and the last to the first).
+    assert np.count_nonzero(full[:7, 7 * 2 : 7 * (N - 1)]) == 0
+    assert np.count_nonzero(full[:7, -7:]) > 0
+
+
+def test_interval_functions_are_built_once_per_parameter_set():
+    st = _shape_settings(TimeOptimalSettings())
+    assert interval_functions(ModelParams(), ModelOptions(), st) is interval_functions(
+        ModelParams(), ModelOptions(), st
+    )
+    # Solver options and the grid do not shape an interval.
+    other = _shape_settings(TimeOptimalSettings(spacing=2.0, max_iter=5, tol=1e-3))
+    assert interval_functions(ModelParams(), ModelOptions(), other) is interval_functions(
+        ModelParams(), ModelOptions(), st
+    )
