@@ -15,8 +15,8 @@ Formulation choices, each measured on real circuits before it was adopted:
   QP, to the same lap time.
 * **A starting barrier for a warm start**: the warm start sits on many active constraints (track
   edges, tyre limits), where IPOPT's defaults made its adaptive barrier collapse and the iterates
-  creep (72-196 iterations on real circuits); a small ``mu_init`` with bound multipliers
-  ``mu / slack`` (:data:`STARTING_BARRIER`) brought it to 26-51, level with the cold start.
+  creep (40-168 iterations on real circuits); a small ``mu_init`` with bound multipliers
+  ``mu / slack`` (:data:`STARTING_BARRIER`) brought it to 23-36, level with the cold start.
 * **Tyres below their peak**: |alpha_f|, |alpha_r| <= the slip angle where the Pacejka force
   reaches 95 % of its peak (``slip_force_share``,
   :meth:`racing_lib.model.ModelParams.slip_angle_at`). Past the peak the optimum is degenerate
@@ -94,9 +94,9 @@ _NXS = NXS
 #: IPOPT options of the NLP's first iterate: a small barrier parameter and bound multipliers
 #: ``mu / slack``. With IPOPT's defaults (mu_init 0.1, multipliers 1) the adaptive barrier fell
 #: to 1e-7 within a few iterations of the warm start, which sits on many active constraints, and
-#: then crept along in short steps: 72-196 iterations on the ten real circuits against 33-60 cold.
-#: Measured on those ten and the two built-in tracks: warm 26-51, cold 23-45 iterations, to the
-#: same lap times (benchmarks/bench_warm_start.py).
+#: then crept along in short steps: 40-168 iterations on ten real circuits and the two built-in
+#: tracks (plan's defaults). With these options: warm 23-36, cold 22-45, to the same lap times
+#: within 0.005 % (benchmarks/bench_plan_speed.py).
 STARTING_BARRIER: tuple[tuple[str, Any], ...] = (
     ("mu_init", 1e-4),
     ("bound_mult_init_method", "mu-based"),
