@@ -591,3 +591,28 @@ def test_a_damaged_build_falls_back_to_the_interpreter(tmp_path, monkeypatch, ca
     with caplog.at_level("WARNING"):
         assert jit.compile_function(fn) is None  # refused to load: the caller interprets
     assert "failed" in caplog.text
+
+
+def test_the_packed_linearization_is_the_mapped_one():
+    from racing_lib.control.mpc.linearize import (
+        packed_map,
+        substep_linearization,
+        unpack_linearization,
+    )
+    from racing_lib.model import ModelOptions, ModelParams
+
+    rng = np.random.default_rng(5)
+    n = 7
+    lin = substep_linearization(ModelParams(), ModelOptions(), 0.1, 2, jit=False)
+    xi = np.column_stack(
+        [rng.uniform(10, 40, n), rng.normal(0, 0.3, n), rng.normal(0, 0.2, n),
+         rng.normal(0, 0.05, n), rng.normal(0, 1, n), rng.uniform(0, 100, n)]
+    )  # fmt: skip
+    u = np.column_stack([rng.normal(0, 0.05, n), rng.normal(0, 2, n)])
+    kappa, theta = rng.normal(0, 0.01, n), rng.normal(0, 0.01, n)
+    A, B, d = lin.map(n)(xi.T, u.T, kappa[None, :], theta[None, :])
+    packed = packed_map(lin, n)(np.vstack([xi.T, u.T, kappa[None, :], theta[None, :]]))
+    A_p, B_p, d_p = unpack_linearization(packed, n)
+    np.testing.assert_array_equal(A_p, np.asarray(A).reshape(NX, n, NX).transpose(1, 0, 2))
+    np.testing.assert_array_equal(B_p, np.asarray(B).reshape(NX, n, NU).transpose(1, 0, 2))
+    np.testing.assert_array_equal(d_p, np.asarray(d).T)

