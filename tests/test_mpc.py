@@ -496,18 +496,23 @@ def test_settings_are_checked():
     assert MX.EY == 4 and U.DELTA == 0
 
 
+def _random_stages(n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """States (n, 6), inputs (n, 2), curvatures and pitches (n,) of n stages, seeded."""
+    rng = np.random.default_rng(5)
+    xi = np.column_stack(
+        [rng.uniform(5, 50, n), rng.normal(0, 0.5, n), rng.normal(0, 0.3, n),
+         rng.normal(0, 0.05, n), rng.normal(0, 1, n), rng.uniform(0, 1000, n)]
+    )  # fmt: skip
+    u = np.column_stack([rng.normal(0, 0.05, n), rng.normal(0, 3, n)])
+    return xi, u, rng.normal(0, 0.02, n), rng.normal(0, 0.02, n)
+
+
 def test_compiled_linearization_equals_the_interpreted_one(setups):
     track, plan, params = setups["shortcut"]
     N = 25
     fast = CoupledMPC(plan, params=params, settings=MPCSettings(horizon=N, jit=True))
     slow = CoupledMPC(plan, params=params, settings=MPCSettings(horizon=N, jit=False))
-    rng = np.random.default_rng(5)
-    xi = np.column_stack(
-        [rng.uniform(5, 50, N), rng.normal(0, 0.5, N), rng.normal(0, 0.3, N),
-         rng.normal(0, 0.05, N), rng.normal(0, 1, N), rng.uniform(0, 1000, N)]
-    )  # fmt: skip
-    u = np.column_stack([rng.normal(0, 0.05, N), rng.normal(0, 3, N)])
-    kappa, theta = rng.normal(0, 0.02, N), rng.normal(0, 0.02, N)
+    xi, u, kappa, theta = _random_stages(N)
     compiled = fast.linearize(xi, u, kappa, theta)
     interpreted = slow.linearize(xi, u, kappa, theta)
     for a, b in zip(compiled, interpreted, strict=True):
@@ -601,15 +606,9 @@ def test_the_packed_linearization_is_the_mapped_one():
     )
     from racing_lib.model import ModelOptions, ModelParams
 
-    rng = np.random.default_rng(5)
     n = 7
     lin = substep_linearization(ModelParams(), ModelOptions(), 0.1, 2, jit=False)
-    xi = np.column_stack(
-        [rng.uniform(10, 40, n), rng.normal(0, 0.3, n), rng.normal(0, 0.2, n),
-         rng.normal(0, 0.05, n), rng.normal(0, 1, n), rng.uniform(0, 100, n)]
-    )  # fmt: skip
-    u = np.column_stack([rng.normal(0, 0.05, n), rng.normal(0, 2, n)])
-    kappa, theta = rng.normal(0, 0.01, n), rng.normal(0, 0.01, n)
+    xi, u, kappa, theta = _random_stages(n)
     A, B, d = lin.map(n)(xi.T, u.T, kappa[None, :], theta[None, :])
     packed = packed_map(lin, n)(np.vstack([xi.T, u.T, kappa[None, :], theta[None, :]]))
     A_p, B_p, d_p = unpack_linearization(packed, n)
