@@ -1,10 +1,14 @@
-"""Compiled CasADi functions, built once per generated code and reused by every process.
+"""CasADi functions on the hot path: compiled once per generated code, called without copies.
 
 CasADi's own ``jit`` option compiles a Function afresh in every process (1-4 s each: every test
 process, notebook kernel and tuning worker paid it) under a new temporary name, so its folder
 grew with every run. Here the C code CasADi generates is hashed; the shared library is built once
 under that hash, kept in one folder per user, and loaded by every later process. The folder
 keeps the :data:`MAX_BUILDS` most recently used builds and removes older ones.
+
+:class:`BufferedFunction` calls a Function (compiled or not) on numpy arrays it owns: a plain
+call converts every input to a CasADi matrix and every output back, which cost more than the
+evaluation itself for the simulated car's substep and the MPC's linearization.
 """
 
 from __future__ import annotations
@@ -19,6 +23,8 @@ import subprocess
 import tempfile
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 log = logging.getLogger(__name__)
 
@@ -140,3 +146,48 @@ def cache_dir() -> str:
         except OSError:
             continue
     return tempfile.mkdtemp(prefix="racing_lib_jit_")
+
+
+class BufferedFunction:
+    """A CasADi Function evaluated in place on numpy buffers.
+
+    Each dense input and output is one flat float64 array in CasADi's column-major order (a
+    matrix of r rows and c columns is the C-ordered array of shape (c, r), so an input whose
+    columns are stages is written row by row). Write the inputs into :attr:`inputs`, call, and
+    read :attr:`outputs`; the outputs are overwritten by the next call, so copy what you keep.
+
+    Parameters
+    ----------
+    fn : casadi.Function
+        A Function with dense inputs and outputs (``casadi.densify`` an output if needed).
+
+    Notes
+    -----
+    A call costs 1-3 microseconds plus the evaluation, against about 15-40 for a plain call with
+    its conversions (``benchmarks/bench_sim.py``, ``benchmarks/bench_mpc.py``).
+    """
+
+    def __init__(self, fn: Any) -> None:
+        for kind, count, sparsity in (
+            ("input", fn.n_in(), fn.sparsity_in),
+            ("output", fn.n_out(), fn.sparsity_out),
+        ):
+            for i in range(count):
+                if not sparsity(i).is_dense():
+                    raise ValueError(
+                        f"BufferedFunction needs dense {kind}s: {kind} {i} of {fn.name()!r} is "
+                        "sparse; densify it when building the Function."
+                    )
+        self.fn = fn
+        self.inputs = [np.zeros(fn.numel_in(i)) for i in range(fn.n_in())]
+        self.outputs = [np.zeros(fn.numel_out(i)) for i in range(fn.n_out())]
+        self._buffer, self._evaluate = fn.buffer()
+        for i, array in enumerate(self.inputs):
+            self._buffer.set_arg(i, memoryview(array))
+        for i, array in enumerate(self.outputs):
+            self._buffer.set_res(i, memoryview(array))
+
+    def __call__(self) -> list[np.ndarray]:
+        """Evaluate on the current :attr:`inputs`; returns :attr:`outputs` (overwritten)."""
+        self._evaluate()
+        return self.outputs

@@ -38,7 +38,8 @@ from racing_lib.geometry import (
     Track,
 )
 from racing_lib.interfaces import Observation
-from racing_lib.vehicle.dynamics import SimState, car_vector_field
+from racing_lib.jit import BufferedFunction
+from racing_lib.vehicle.dynamics import SimState, rk4_substep_function
 from racing_lib.vehicle.forces import (
     axle_cornering_stiffness,
     drive_force,
@@ -117,6 +118,7 @@ class SimulatedCar:
         self._stiffness = c_sum * (1.0 / p.m + max(p.l_f, p.l_r) ** 2 / p.I_zz)
         self._walls = track.boundary == "walls"
         self._tracker = FrenetTracker(track.centerline)
+        self._rk4_fn = BufferedFunction(rk4_substep_function(p))
         self._build_tables()
         # Extents used by the edge checks: body corners (walls) and wheels (open tracks).
         self._body_front = p.l_f + p.overhang_front
@@ -275,31 +277,22 @@ class SimulatedCar:
         return drive_force(p, vx, throttle, self._gear)
 
     def _rk4(self, h: float, delta_cmd: float, f_drive: float, f_brake: float) -> None:
-        p = self.params
-        theta = self._theta
-        mu_w = self._mu_wheels
-        a_tr = self._a_transfer
-        y0 = self._state
-        # Loads are frozen over the substep (quasi-static, previous substep's accelerations).
-        k1, _ = car_vector_field(y0, delta_cmd, f_drive, f_brake, theta, mu_w, a_tr, p)
-        y1 = [a + 0.5 * h * b for a, b in zip(y0, k1, strict=True)]
-        k2, _ = car_vector_field(y1, delta_cmd, f_drive, f_brake, theta, mu_w, a_tr, p)
-        y2 = [a + 0.5 * h * b for a, b in zip(y0, k2, strict=True)]
-        k3, _ = car_vector_field(y2, delta_cmd, f_drive, f_brake, theta, mu_w, a_tr, p)
-        y3 = [a + h * b for a, b in zip(y0, k3, strict=True)]
-        k4, a_g = car_vector_field(y3, delta_cmd, f_drive, f_brake, theta, mu_w, a_tr, p)
-        c = h / 6.0
-        new = [
-            a + c * (b1 + 2.0 * b2 + 2.0 * b3 + b4)
-            for a, b1, b2, b3, b4 in zip(y0, k1, k2, k3, k4, strict=True)
-        ]
+        # One RK4 substep of car_vector_field, evaluated in place by a CasADi Function built from
+        # it (rk4_substep_function); the loads are frozen over the substep (quasi-static, from
+        # the previous substep's accelerations).
+        self._rk4_fn.inputs[0][:] = (  # in the order of RK4_IN
+            *self._state, delta_cmd, f_drive, f_brake, self._theta, *self._mu_wheels,
+            *self._a_transfer, h,
+        )  # fmt: skip
+        out = self._rk4_fn()[0].tolist()
+        new = out[0:7]
         if not math.isfinite(sum(new)):
             self._raise_nonfinite(new)
         self._state = new
         # The ground-force accelerations at the end of the substep set the next loads.
-        self._a_transfer = a_g
+        self._a_transfer = (out[7], out[8])
         vx, vy, r = new[SimState.VX], new[SimState.VY], new[SimState.R]
-        self._a_body = (k4[SimState.VX] - r * vy, k4[SimState.VY] + r * vx)
+        self._a_body = (out[9] - r * vy, out[10] + r * vx)
 
     def _raise_nonfinite(self, state: list[float]) -> None:
         bad = [

@@ -615,3 +615,39 @@ def test_the_packed_linearization_is_the_mapped_one():
     np.testing.assert_array_equal(A_p, np.asarray(A).reshape(NX, n, NX).transpose(1, 0, 2))
     np.testing.assert_array_equal(B_p, np.asarray(B).reshape(NX, n, NU).transpose(1, 0, 2))
     np.testing.assert_array_equal(d_p, np.asarray(d).T)
+
+
+def test_a_buffered_function_evaluates_in_place_and_refuses_sparse_outputs():
+    import casadi as ca
+
+    from racing_lib.jit import BufferedFunction
+
+    x = ca.SX.sym("x", 2, 3)
+    fn = BufferedFunction(ca.Function("f", [x], [ca.densify(2.0 * x.T)]))
+    fn.inputs[0][:] = np.arange(6.0)  # column-major: x = [[0, 2, 4], [1, 3, 5]]
+    (out,) = fn()
+    np.testing.assert_array_equal(out, [0.0, 4.0, 8.0, 2.0, 6.0, 10.0])  # 2 x^T, column-major
+    fn.inputs[0][:] = 1.0
+    assert fn()[0] is out and np.all(out == 2.0)  # the same array, overwritten
+    with pytest.raises(ValueError, match="densify"):
+        BufferedFunction(ca.Function("g", [x], [ca.SX(ca.Sparsity.diag(2))]))
+
+
+def test_the_controllers_linearization_matches_the_packed_call(circle_setup):
+    # The controller fills the buffer row by row (stages); a wrong order would scramble A, B, d.
+    from racing_lib.control.mpc.linearize import unpack_linearization
+
+    plan, params = circle_setup
+    n = 6
+    ctrl = CoupledMPC(plan, params=params, settings=MPCSettings(horizon=n, jit=False))
+    assert ctrl.settings.discretization != "zoh"  # else A, B, d are transformed after the call
+    xi, u, kappa, theta = _random_stages(n)
+    A, B, d = ctrl.linearize(xi, u, kappa, theta)
+    direct = ctrl._lin_map.fn(np.vstack([xi.T, u.T, kappa[None, :], theta[None, :]]))
+    A_p, B_p, d_p = unpack_linearization(direct, n)
+    np.testing.assert_array_equal(A, A_p)
+    np.testing.assert_array_equal(B, B_p)
+    np.testing.assert_array_equal(d, d_p)
+    A2, _, _ = ctrl.linearize(xi + 0.1, u, kappa, theta)
+    assert not np.array_equal(A, A2)
+    np.testing.assert_array_equal(A, A_p)  # the first result is a copy, not the reused buffer

@@ -22,8 +22,11 @@ from racing_lib.interfaces import (
 from racing_lib.sim import SimulatedCar
 from racing_lib.vehicle import CASADI_OPS, VehicleParams, static_axle_loads
 from racing_lib.vehicle.dynamics import (
+    RK4_IN,
+    RK4_OUT,
     SimState,
     car_vector_field,
+    rk4_substep_function,
 )
 
 P = VehicleParams()
@@ -268,6 +271,65 @@ def test_vector_field_casadi_equals_float():
         np.testing.assert_allclose(
             np.asarray(f(state, inp)).ravel(), [*d_f, *a_f], rtol=1e-10, atol=1e-9
         )
+
+
+def float_rk4(y0, delta_cmd, f_drive, f_brake, theta, mu_w, a_tr, h):
+    """One RK4 substep of the float vector field: the reference for the compiled substep."""
+
+    def field(y):
+        return car_vector_field(y, delta_cmd, f_drive, f_brake, theta, mu_w, a_tr, P)
+
+    k1, _ = field(y0)
+    k2, _ = field([a + 0.5 * h * b for a, b in zip(y0, k1, strict=True)])
+    k3, _ = field([a + 0.5 * h * b for a, b in zip(y0, k2, strict=True)])
+    k4, a_g = field([a + h * b for a, b in zip(y0, k3, strict=True)])
+    new = [
+        a + h / 6.0 * (b1 + 2 * b2 + 2 * b3 + b4)
+        for a, b1, b2, b3, b4 in zip(y0, k1, k2, k3, k4, strict=True)
+    ]
+    return new, a_g, (k4[SimState.VX], k4[SimState.VY])
+
+
+def test_the_simulators_substep_is_rk4_of_the_float_vector_field():
+    # The simulator evaluates rk4_substep_function in place; it must be the float RK4 of
+    # car_vector_field, across speeds, slip, full throttle and brake, and off-track friction.
+    rng = np.random.default_rng(3)
+    fn = rk4_substep_function(P)
+    assert fn.numel_in(0) == sum(n for _, n in RK4_IN.values())
+    assert fn.numel_out(0) == sum(n for _, n in RK4_OUT.values())
+    for _ in range(20):
+        state = [*rng.normal(0, 100, 2), rng.normal(0, 3), rng.uniform(0.5, 80),
+                 *rng.normal(0, 1.0, 2), rng.normal(0, 0.2)]  # fmt: skip
+        inputs = (rng.normal(0, 0.3), rng.uniform(0, 8000), rng.uniform(0, 12000) * rng.integers(2),
+                  rng.normal(0, 0.05), tuple(rng.uniform(0.5, 1.3, 4)), tuple(rng.normal(0, 8, 2)),
+                  0.025)  # fmt: skip
+        want = float_rk4(state, *inputs)
+        d, fd, fb, th, mu, a_tr, h = inputs
+        got = np.asarray(fn([*state, d, fd, fb, th, *mu, *a_tr, h])).ravel()
+        np.testing.assert_allclose(got, np.concatenate(want), rtol=1e-12, atol=1e-10)
+
+
+def test_the_simulators_step_uses_the_rk4_layout(monkeypatch):
+    # A car whose substep is the float RK4 drives the same lap start as the real one: the order
+    # in which SimulatedCar fills the input is RK4_IN's.
+    car = SimulatedCar(stadium(), start_speed=30.0)
+    ref = SimulatedCar(stadium(), start_speed=30.0)
+    car.reset(seed=4)
+    ref.reset(seed=4)
+
+    def rk4_in_python(h, delta_cmd, f_drive, f_brake):
+        new, a_g, (dvx, dvy) = float_rk4(ref._state, delta_cmd, f_drive, f_brake, ref._theta,
+                                         ref._mu_wheels, ref._a_transfer, h)  # fmt: skip
+        ref._state, ref._a_transfer = new, a_g
+        ref._a_body = (dvx - new[SimState.R] * new[SimState.VY],
+                       dvy + new[SimState.R] * new[SimState.VX])  # fmt: skip
+
+    monkeypatch.setattr(ref, "_rk4", rk4_in_python)
+    for k in range(60):
+        steer, pedal = 0.02 * math.sin(0.1 * k), (1.0 if k < 30 else -0.6)
+        a, b = car.step(steer, pedal), ref.step(steer, pedal)
+        assert a.x == pytest.approx(b.x, abs=1e-9) and a.vx == pytest.approx(b.vx, abs=1e-9)
+        assert a.r == pytest.approx(b.r, abs=1e-9) and a.psi == pytest.approx(b.psi, abs=1e-9)
 
 
 def test_grade_decelerates_by_g_sin_theta():

@@ -30,6 +30,7 @@ from racing_lib.control.mpc.settings import MPCSettings
 from racing_lib.errors import ControlError
 from racing_lib.geometry.spline import wrap_angle
 from racing_lib.interfaces import Command
+from racing_lib.jit import BufferedFunction
 from racing_lib.model import NU, NX, U, X, discrete_linearization
 
 __all__ = ["MPCBase", "PlanTable", "edge_band"]
@@ -193,7 +194,7 @@ class MPCBase:
                 int(self.settings.substeps),
                 bool(self.settings.jit),
             )
-        self._lin_map = packed_map(lin, N)
+        self._lin_map = BufferedFunction(packed_map(lin, N))
         self._counters = {"qp_failures": 0, "fallback_shifted": 0, "fallback_brake": 0}
         self._rescues_at_reset = 0
         self._qp_list: list[TrackingQP] = []  # the QPs solved each period (set by subclasses)
@@ -296,8 +297,15 @@ class MPCBase:
             ``xi_{k+1} ~= A_k xi_k + B_k u_k + d_k``.
         """
         N = self.settings.horizon
-        packed = np.vstack([xi_bar.T, u_bar.T, kappa[None, :], theta[None, :]])
-        A, B, d = unpack_linearization(self._lin_map(packed), N)
+        # The packed input's columns are stages, so in column-major order it is written row by
+        # row: stage k's state, input, curvature and pitch.
+        packed = self._lin_map.inputs[0].reshape(N, -1)
+        nx, nu = xi_bar.shape[1], u_bar.shape[1]
+        packed[:, :nx] = xi_bar
+        packed[:, nx : nx + nu] = u_bar
+        packed[:, nx + nu] = kappa
+        packed[:, nx + nu + 1] = theta
+        A, B, d = unpack_linearization(self._lin_map()[0].copy(), N)
         if self.settings.discretization == "zoh":
             A, B, d = zero_order_hold(A, B, d, self.settings.dt)
         return A, B, d

@@ -96,9 +96,14 @@ def packed_map(lin: Any, horizon: int) -> Any:
 
 
 def unpack_linearization(packed: Any, horizon: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``A (N, 6, 6), B (N, 6, 2), d (N, 6)`` from the output of :func:`packed_map`."""
+    """``A (N, 6, 6), B (N, 6, 2), d (N, 6)`` from the output of :func:`packed_map`.
+
+    ``packed`` is the CasADi matrix, or its elements in column-major order as a numpy array
+    (:class:`racing_lib.jit.BufferedFunction`); the results are views of it.
+    """
     nx, nu = NX, NU
-    out = np.array(packed.elements()).reshape(horizon, nx * (nx + nu + 1))
+    flat = packed if isinstance(packed, np.ndarray) else np.array(packed.elements())
+    out = flat.reshape(horizon, nx * (nx + nu + 1))
     A = out[:, : nx * nx].reshape(horizon, nx, nx).transpose(0, 2, 1)
     B = out[:, nx * nx : nx * (nx + nu)].reshape(horizon, nu, nx).transpose(0, 2, 1)
     return A, B, out[:, nx * (nx + nu) :]
