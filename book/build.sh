@@ -7,7 +7,9 @@
 # place (Jupyter Book 1 only includes files below its source root); _config.yml and _toc.yml live
 # here in book/ and are passed explicitly. Every notebook is executed (in fast mode: shorter demos,
 # same algorithms), and every Sphinx warning -- a broken cross-reference, a missing figure, a cell
-# that raises -- fails the build (-W), after reporting all of them (--keep-going).
+# that raises -- fails the build (-W), after reporting all of them (--keep-going). Then the pages
+# are read as a reader gets them (book/check_rendered.py): raw $$, \begin{, a pipe table or a
+# Python repr on any page, or fewer equations than the source holds, fails the build too.
 # Extra arguments are passed on to jupyter-book (e.g. --all to rebuild every page).
 set -euo pipefail
 repo="$(cd "$(dirname "$0")/.." && pwd)"
@@ -20,4 +22,5 @@ jupyter-book build . \
   --path-output book \
   --warningiserror --keep-going \
   "$@"
+python "$repo/book/check_rendered.py"
 echo "book: built in $(( $(date +%s) - start )) s -> book/_build/html/index.html"

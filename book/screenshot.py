@@ -1,18 +1,19 @@
-"""Screenshots of the built book in headless Chromium: proof that its pages render.
+"""Screenshots of the built book in headless Chromium, and a count of the equations it typeset.
 
 Usage (after ``book/build.sh``)::
 
-    python book/screenshot.py [--page book/intro.html --page notebooks/01_frenet_kinematics.html]
+    python book/screenshot.py                       # the front page and every chapter
+    python book/screenshot.py --page notebooks/01_frenet_kinematics.html --height 6000
 
-Saves one PNG per page to ``book/_build/screenshots/`` (CI keeps them as artifacts) and fails when
-Chromium is missing, a page is missing, or a screenshot is not written or is (nearly) blank.
-Chromium runs with a fresh profile and without background networking, sync or updates, so it
-touches nothing outside a temporary directory.
+Saves one PNG per page to ``book/_build/screenshots/`` (CI keeps them as artifacts). For each page
+it also asks Chromium for the page as MathJax left it and counts the typeset equations against
+the math elements of the built HTML: a page whose MathJax did not load, or that MathJax could not
+parse, typesets fewer. Fails when Chromium is missing, a page is missing, a screenshot is not
+written or is (nearly) blank, or an equation was not typeset.
 
-Mathematics: the book loads MathJax from a CDN, which a sandboxed CI machine cannot reach. When
-Debian's ``libjs-mathjax`` is installed (``apt-get install libjs-mathjax``), the page is shot from a
-temporary copy that loads that local MathJax instead (``--cdn`` keeps the page as built), so the
-screenshot shows typeset equations rather than raw TeX. The built book itself is not changed.
+The book serves its own MathJax (``sphinx-mathjax-offline``, copied to ``_static/mathjax``), so
+the pages typeset with no network; Chromium runs with a fresh profile and without background
+networking, sync or updates, so it touches nothing outside a temporary directory.
 """
 
 from __future__ import annotations
@@ -29,22 +30,12 @@ from pathlib import Path
 BOOK = Path(__file__).resolve().parent
 HTML = BOOK / "_build" / "html"
 OUT = BOOK / "_build" / "screenshots"
-#: The front page and one chapter page.
-DEFAULT_PAGES = ("book/intro.html", "notebooks/01_frenet_kinematics.html")
-WINDOW = (1280, 1600)  # [px] width, height
-#: Debian's MathJax 2 (package libjs-mathjax), used for offline screenshots.
-LOCAL_MATHJAX = Path("/usr/share/javascript/mathjax/MathJax.js")
-_CDN_SCRIPT = re.compile(
-    r'<script[^>]*src="https://cdn\.jsdelivr\.net/npm/mathjax@3[^"]*"[^>]*></script>'
-)
-_MATHJAX3_CONFIG = re.compile(r"<script>window\.MathJax = .*?</script>", re.S)
-_MATHJAX2 = (
-    '<script type="text/x-mathjax-config">MathJax.Hub.Config({tex2jax: {inlineMath: '
-    "[['\\\\(', '\\\\)']], displayMath: [['\\\\[', '\\\\]']], processEscapes: true, "
-    # MyST marks the page tex2jax_ignore and lists the classes to typeset (MathJax 3 style)
-    "processClass: 'tex2jax_process|mathjax_process|math|output_area'}});</script>"
-    '<script src="{src}?config=TeX-AMS-MML_HTMLorMML"></script>'
-)
+#: The front page, the exercises page and every chapter (notebooks/*.html, found at run time).
+FIXED_PAGES = ("book/intro.html", "book/exercises.html")
+WINDOW = (1280, 1600)  # [px] width, default height
+#: A math element of the built page (display or inline), and one MathJax typeset.
+_MATH_ELEMENT = re.compile(r'<(?:div|span) class="math(?: [^"]*)?"')
+_TYPESET = re.compile(r"<mjx-container\b")
 
 
 def find_chromium() -> str | None:
@@ -111,43 +102,45 @@ def _png_stats(path: Path) -> tuple[int, int, int]:
     return width, height, len(levels)
 
 
-def offline_copy(page: Path) -> Path | None:
-    """A copy of ``page`` beside it that loads the local MathJax 2 instead of the CDN's MathJax 3.
-
-    None when there is no local MathJax or the page loads no MathJax.
-    """
-    if not LOCAL_MATHJAX.exists():
-        return None
-    html = page.read_text(encoding="utf-8")
-    if not _CDN_SCRIPT.search(html):
-        return None
-    html = _MATHJAX3_CONFIG.sub("", html)
-    html = _CDN_SCRIPT.sub(lambda _: _MATHJAX2.replace("{src}", LOCAL_MATHJAX.as_uri()), html)
-    copy = page.with_name(page.stem + ".offline-screenshot.html")
-    copy.write_text(html, encoding="utf-8")
-    return copy
+def default_pages() -> list[str]:
+    """The front page, the exercises page and every chapter page of the built book."""
+    chapters = sorted(p.relative_to(HTML).as_posix() for p in (HTML / "notebooks").glob("*.html"))
+    return [*FIXED_PAGES, *chapters]
 
 
-def screenshot(chromium: str, page: Path, png: Path) -> None:
+def _chromium_cmd(chromium: str, profile: str, height: int) -> list[str]:
+    return [
+        chromium,
+        "--headless",
+        "--no-sandbox",
+        "--disable-gpu",
+        "--disable-background-networking",
+        "--disable-component-update",
+        "--disable-sync",
+        "--no-first-run",
+        "--hide-scrollbars",
+        f"--user-data-dir={profile}",
+        f"--window-size={WINDOW[0]},{height}",
+        "--virtual-time-budget=8000",  # let MathJax and the theme's scripts finish
+    ]
+
+
+def typeset_count(chromium: str, page: Path) -> tuple[int, int]:
+    """(math elements in the built HTML, equations MathJax typeset in Chromium) of a page."""
+    want = len(_MATH_ELEMENT.findall(page.read_text(encoding="utf-8")))
+    with tempfile.TemporaryDirectory(prefix="racing-lab-chromium-") as profile:
+        cmd = [*_chromium_cmd(chromium, profile, WINDOW[1]), "--dump-dom", page.as_uri()]
+        proc = subprocess.run(cmd, capture_output=True, text=True, timeout=180)
+    if proc.returncode != 0:
+        raise RuntimeError(f"chromium could not load {page}:\n{proc.stderr[-2000:]}")
+    return want, len(_TYPESET.findall(proc.stdout))
+
+
+def screenshot(chromium: str, page: Path, png: Path, height: int = WINDOW[1]) -> None:
     """Render ``page`` (an HTML file) to ``png`` with headless Chromium."""
     with tempfile.TemporaryDirectory(prefix="racing-lab-chromium-") as profile:
-        cmd = [
-            chromium,
-            "--headless",
-            "--no-sandbox",
-            "--disable-gpu",
-            "--disable-background-networking",
-            "--disable-component-update",
-            "--disable-sync",
-            "--no-first-run",
-            "--hide-scrollbars",
-            f"--user-data-dir={profile}",
-            f"--window-size={WINDOW[0]},{WINDOW[1]}",
-            "--virtual-time-budget=5000",  # let MathJax and the theme's scripts finish
-            f"--screenshot={png}",
-            page.as_uri(),
-        ]
-        proc = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+        cmd = [*_chromium_cmd(chromium, profile, height), f"--screenshot={png}", page.as_uri()]
+        proc = subprocess.run(cmd, capture_output=True, text=True, timeout=180)
     if proc.returncode != 0 or not png.exists():
         raise RuntimeError(
             f"chromium could not screenshot {page} (exit {proc.returncode}):\n{proc.stderr[-2000:]}"
@@ -159,14 +152,14 @@ def main(argv: list[str]) -> int:
     parser.add_argument(
         "--page",
         action="append",
-        help="page to shoot, relative to book/_build/html (repeatable; default: front page and "
-        "chapter 01)",
+        help="page to shoot, relative to book/_build/html (repeatable; default: the front page, "
+        "the exercises page and every chapter)",
     )
     parser.add_argument(
-        "--cdn", action="store_true", help="do not substitute a local MathJax for the CDN's"
+        "--height", type=int, default=WINDOW[1], help="window height in px (taller shows more)"
     )
     args = parser.parse_args(argv)
-    pages = args.page or list(DEFAULT_PAGES)
+    pages = args.page or default_pages()
     chromium = find_chromium()
     if chromium is None:
         print(
@@ -183,17 +176,22 @@ def main(argv: list[str]) -> int:
             continue
         png = OUT / (rel.replace("/", "_").removesuffix(".html") + ".png")
         png.unlink(missing_ok=True)
-        copy = None if args.cdn else offline_copy(page)
-        try:
-            screenshot(chromium, copy or page, png)
-        finally:
-            if copy is not None:
-                copy.unlink(missing_ok=True)
+        screenshot(chromium, page, png, args.height)
         width, height, levels = _png_stats(png)
-        ok = (width, height) == WINDOW and (levels < 0 or levels >= 8)
-        print(f"screenshot: {png.relative_to(BOOK.parent)} {width}x{height}, {levels} grey levels")
-        if not ok:
+        want, typeset = typeset_count(chromium, page)
+        print(
+            f"screenshot: {png.relative_to(BOOK.parent)} {width}x{height}, {levels} grey levels; "
+            f"{typeset} of {want} equations typeset"
+        )
+        if (width, height) != (WINDOW[0], args.height) or 0 <= levels < 8:
             print(f"screenshot: {png.name} looks blank or has the wrong size", file=sys.stderr)
+            failed = True
+        if typeset < want:
+            print(
+                f"screenshot: {rel}: MathJax typeset {typeset} of {want} equations (is "
+                "_static/mathjax there? does the browser console show a TeX error?)",
+                file=sys.stderr,
+            )
             failed = True
     return 1 if failed else 0
 

@@ -1,10 +1,12 @@
 """The book: its table of contents points at files that exist, the API page covers every module,
-the reference list matches the paper's citations, and (opt-in, as CI does) it builds without a
-warning and its pages render in headless Chromium.
+the reference list matches the paper's citations, the rendered-page check catches each fault it
+names, and (opt-in, as CI does) the book builds without a warning, no page shows raw markup and
+every equation is typeset in headless Chromium.
 
 The full build executes every notebook, so it is not part of a plain ``pytest`` run: CI runs
-``book/build.sh`` and ``book/screenshot.py`` as their own step. Set ``RACING_LIB_BOOK=1`` to run
-that build here too (it needs ``pip install -e ".[book]"`` and Chromium).
+``book/build.sh``, ``book/check_rendered.py`` and ``book/screenshot.py`` as their own step. Set
+``RACING_LIB_BOOK=1`` to run that build here too (it needs ``pip install -e ".[book]"`` and
+Chromium).
 """
 
 from __future__ import annotations
@@ -102,12 +104,13 @@ def test_build_command_fails_on_warnings():
     script = (BOOK / "build.sh").read_text()
     assert "--warningiserror" in script and "--keep-going" in script
     assert "RACING_LIB_FAST" in script
+    assert "check_rendered.py" in script  # the rendered pages are checked as part of the build
     assert os.access(BOOK / "build.sh", os.X_OK), "book/build.sh must be executable"
 
 
 @pytest.mark.slow
 def test_book_builds_and_renders():
-    """Opt-in (RACING_LIB_BOOK=1): the documented build, then screenshots of two pages."""
+    """Opt-in (RACING_LIB_BOOK=1): the documented build, its rendered-page check, screenshots."""
     if os.environ.get("RACING_LIB_BOOK", "") != "1":
         pytest.skip("set RACING_LIB_BOOK=1 to build the book here (CI builds it in its own step)")
     if shutil.which("jupyter-book") is None:
@@ -115,8 +118,133 @@ def test_book_builds_and_renders():
     build = subprocess.run(["bash", str(BOOK / "build.sh")], capture_output=True, text=True)
     assert build.returncode == 0, build.stdout[-3000:] + build.stderr[-3000:]
     assert (BOOK / "_build" / "html" / "book" / "intro.html").exists()
+    looked = subprocess.run(
+        [sys.executable, str(BOOK / "check_rendered.py")], capture_output=True, text=True
+    )
+    assert looked.returncode == 0, looked.stdout + looked.stderr
     shots = subprocess.run(
         [sys.executable, str(BOOK / "screenshot.py")], capture_output=True, text=True
     )
     assert shots.returncode == 0, shots.stdout + shots.stderr
-    assert len(list((BOOK / "_build" / "screenshots").glob("*.png"))) >= 2
+    chapters = list((REPO / "notebooks").glob("*.ipynb"))
+    assert len(list((BOOK / "_build" / "screenshots").glob("*.png"))) >= len(chapters) + 1
+
+
+def _check_rendered():
+    spec = importlib.util.spec_from_file_location("check_rendered", BOOK / "check_rendered.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+_CLEAN_PAGE = """<html><head><script>var x = "$$";</script></head><body>
+<p>The lap time is</p>
+<div class="math notranslate nohighlight">\\[T = \\int_0^L \\frac{ds}{\\dot s}\\]</div>
+<p>Inline <span class="math notranslate nohighlight">\\(\\kappa\\)</span>
+and code <code>|---|</code>.</p>
+<div class="cell docutils container"><div class="cell_input docutils container"><pre>
+print("$$ \\\\begin{x} <object at 0x1>")</pre></div>
+<div class="cell_output docutils container"><pre>lap 105.743 s</pre></div></div>
+<table><tr><td>a</td></tr></table></body></html>"""
+
+_BROKEN_PAGE = """<html><body>
+<p>The lap time is
+$$ T = \\int ds $$</p>
+<ul><li><p>\\lambda_k \\bigr) \\begin{cases} 1</p></li></ul>
+<p>| row | lap |
+|---|---|
+| main | 105.7 |</p>
+<div class="cell docutils container"><div class="cell_output docutils container">
+<pre>&lt;matplotlib.legend.Legend at 0x7f3a2c1d&gt;</pre>
+<pre>&lt;racing_lib.planning.PlanResult object at 0x7f00ff&gt;</pre></div></div>
+</body></html>"""
+
+
+def test_the_rendered_page_check_passes_a_clean_page_and_names_each_fault(tmp_path):
+    check = _check_rendered()
+    clean, broken = tmp_path / "clean.html", tmp_path / "broken.html"
+    clean.write_text(_CLEAN_PAGE)
+    broken.write_text(_BROKEN_PAGE)
+    assert check.check_page(clean) == []
+    problems = "\n".join(check.check_page(broken))
+    for name in ("raw display math", "raw LaTeX environment", "Markdown table as text",
+                 "matplotlib repr", "Python repr"):  # fmt: skip
+        assert name in problems, (name, problems)
+    assert check.main([str(broken)]) == 1 and check.main([str(clean)]) == 0
+
+
+def test_the_rendered_page_check_counts_equations_against_the_source(tmp_path):
+    import json
+
+    check = _check_rendered()
+    cells = [
+        {"cell_type": "markdown", "metadata": {}, "source": ["Lap\n\n$$\nT\n$$\n\nand $$x$$\n"]},
+        {"cell_type": "markdown", "metadata": {}, "source": ["```\n$$ not math $$\n```\n"]},
+        {"cell_type": "code", "metadata": {}, "source": ["x = '$$'"], "outputs": []},
+    ]
+    source = tmp_path / "ch.ipynb"
+    source.write_text(json.dumps({"cells": cells, "metadata": {}, "nbformat": 4,
+                                  "nbformat_minor": 5}))  # fmt: skip
+    assert check.source_display_math(source) == 2
+    page = tmp_path / "ch.html"
+    page.write_text('<p>Lap</p><div class="math">\\[T\\]</div><p>and</p>')
+    (problem,) = check.check_page(page, source)
+    assert "2 display equations" in problem and "1 rendered as math" in problem
+    page.write_text('<div class="math">\\[T\\]</div><div class="math">\\[x\\]</div>')
+    assert check.check_page(page, source) == []
+
+
+def _markdown_cells(notebook: Path) -> list[str]:
+    import json
+
+    cells = json.loads(notebook.read_text(encoding="utf-8"))["cells"]
+    return ["".join(c["source"]) for c in cells if c["cell_type"] == "markdown"]
+
+
+@pytest.mark.parametrize(
+    "notebook",
+    sorted((REPO / "notebooks").glob("*.ipynb")) + sorted((REPO / "exercises").glob("*.ipynb")),
+    ids=lambda p: p.stem,
+)
+def test_display_math_stands_in_its_own_block(notebook):
+    # MyST reads a $$ glued to the line above as text inside the paragraph (and a "+" or ">" line
+    # of the equation as a list or a quote): the equation reaches the page as raw LaTeX.
+    for cell in _markdown_cells(notebook):
+        lines = cell.split("\n")
+        inside = False
+        for k, line in enumerate(lines):
+            if not line.strip().startswith("$$") and not (inside and line.strip().endswith("$$")):
+                continue
+            if not inside:
+                above = lines[k - 1].strip() if k else ""
+                assert above == "", (
+                    f"{notebook.name}: $$ right after {above[:60]!r}: add a blank line"
+                )
+            closes = line.strip().count("$$") >= 2 if not inside else True
+            inside = not closes
+            if closes and k + 1 < len(lines):
+                below = lines[k + 1].strip()
+                assert below == "", (
+                    f"{notebook.name}: text {below[:60]!r} right after $$: add a blank line"
+                )
+        assert not inside, f"{notebook.name}: a $$ block is not closed"
+
+
+def test_the_rendered_page_check_catches_glued_display_math(tmp_path):
+    # The fault this book had: the same Markdown rendered by MyST's own parser, with and without
+    # the blank line before $$.
+    markdown_it = pytest.importorskip("markdown_it")
+    dollarmath = pytest.importorskip("mdit_py_plugins.dollarmath")
+    import json
+
+    check = _check_rendered()
+    md = markdown_it.MarkdownIt("commonmark").use(dollarmath.dollarmath_plugin)
+    for text, broken in (("The lap time is\n$$\nT = \\int ds\n$$\n", True),
+                         ("The lap time is\n\n$$\nT = \\int ds\n$$\n", False)):  # fmt: skip
+        source = tmp_path / "ch.ipynb"
+        cell = {"cell_type": "markdown", "metadata": {}, "source": [text]}
+        source.write_text(json.dumps({"cells": [cell], "metadata": {}, "nbformat": 4,
+                                      "nbformat_minor": 5}))  # fmt: skip
+        page = tmp_path / "ch.html"
+        page.write_text(f"<html><body>{md.render(text)}</body></html>")
+        assert bool(check.check_page(page, source)) == broken, md.render(text)
