@@ -283,6 +283,78 @@ def test_pedal_without_the_coasting_term():
     _wrong(ch05.check_pedal_inversion(no_base), "pedal released")
 
 
+def test_pedal_chosen_by_the_sign_of_a_x():
+    # The mistake the hint is written for: throttle or brake by the sign of a_x, not of the
+    # excess over coasting. Only cases where the two signs differ reveal it; both are reported.
+    def by_sign(pedal_map, a_x, xi):
+        excess = a_x - pedal_map.m_0 - float(np.dot(pedal_map.m_xi, xi))
+        u = excess / pedal_map.m_thr if a_x >= 0 else excess / pedal_map.m_brk
+        return float(np.clip(u, -1.0, 1.0))
+
+    result = ch05.check_pedal_inversion(by_sign)
+    _wrong(result, "2 of 8 cases are wrong", "needs throttle", "needs brake", "not by the sign")
+    assert str(result).index("needs throttle") < str(result).index("Also")
+
+
+@pytest.mark.parametrize(
+    ("check", "answer"),
+    [
+        (ch01.check_frenet_projection, lambda path, x, y: path.to_frenet(x, y)[:2]),
+        (ch01.check_frenet_to_cartesian, lambda path, s, e_y: path.to_cartesian(s, e_y)[:2]),
+        (ch05.check_pedal_inversion, lambda pedal_map, a_x, xi: pedal_map.pedal(a_x, xi)),
+    ],
+    ids=["to_frenet", "to_cartesian", "pedal"],
+)
+def test_the_library_function_the_exercise_rebuilds_is_refused(check, answer):
+    _wrong(check(answer), "calls the library's", "asks you to write")
+
+
+def test_the_library_function_is_refused_under_another_name():
+    from racing_lib.control.mpc import steering_lag_coefficients as lag
+
+    def steering_lag(tau, dt):
+        return lag(tau, dt)
+
+    _wrong(ch05.check_steering_lag(steering_lag), "steering_lag_coefficients")
+
+
+def test_a_helper_of_the_readers_own_that_shares_a_name_is_not_refused():
+    pedal_for = _solutions("05_mpc")["pedal_for"]
+
+    def pedal(pedal_map, a_x, xi):  # the reader's own helper, named like the library method
+        return pedal_for(pedal_map, a_x, xi)
+
+    def answer(pedal_map, a_x, xi):
+        return pedal(pedal_map, a_x, xi)
+
+    assert ch05.check_pedal_inversion(answer).passed
+
+
+def test_every_failing_case_is_reported_the_most_telling_first():
+    def check_case(case):
+        if case == "ok":
+            return
+        raise grader.Wrong(f"case {case} is off.", telling=2.0 if case == "b" else 0.0,
+                           hint=f"hint {case}." if case != "c" else "hint a.")  # fmt: skip
+
+    with pytest.raises(grader.Wrong) as info:
+        grader.every_case(["a", "ok", "b", "c"], check_case)
+    text = str(info.value)
+    assert text.startswith("3 of 4 cases are wrong. Case b is off. hint b.")
+    assert "  - case a is off. hint a." in text
+    assert "  - case c is off." in text and text.count("hint a.") == 1  # each hint said once
+
+
+def test_a_point_just_after_the_start_line_gets_the_wrap_around_hint():
+    frenet_projection = _solutions("01_frenet")["frenet_projection"]
+
+    def clipped_at_the_line(path, x, y):
+        s, e_y = frenet_projection(path, x, y)
+        return (0.0 if s < 2.0 else s), e_y  # a search that cannot cross the line stops at 0
+
+    _wrong(ch01.check_frenet_projection(clipped_at_the_line), "near the start line", "modulo")
+
+
 def test_objective_without_collision_time():
     def no_collision(log, metrics, track_length, w_t, w_s):
         lap = log.in_lap

@@ -22,8 +22,10 @@ from racing_lib.grading.grader import (
     as_tuple,
     call,
     differs,
+    every_case,
     expect_close,
     grade,
+    refuse_library,
 )
 
 __all__ = ["check_frenet_projection", "check_frenet_rates", "check_frenet_to_cartesian"]
@@ -41,11 +43,25 @@ def _track():
 def _cases(path, track) -> list[tuple[float, float]]:
     """(s, e_y) points on the track: straights, corners, both sides, across the start line."""
     rng = np.random.default_rng(1)
-    s = np.concatenate([[5.0, path.length - 3.0], rng.uniform(0.0, path.length, 8)])
+    s = np.concatenate([[5.0, path.length - 3.0, 0.4], rng.uniform(0.0, path.length, 8)])
     side = np.where(np.arange(s.size) % 2 == 0, 1.0, -1.0)
     width = np.where(side > 0, track.width_left(s), track.width_right(s))
     e_y = side * rng.uniform(0.2, 0.8, s.size) * width
     return list(zip(s.tolist(), e_y.tolist(), strict=True))
+
+
+#: What exercises 1.1 and 1.2 rebuild (methods of Path and the tracker); an answer using them is
+#: refused.
+_FRENET_LIBRARY = {
+    "to_frenet": None,
+    "to_frenet_along": None,
+    "to_cartesian": None,
+    "FrenetTracker": None,
+}
+_FRENET_TASK = (
+    "find the nearest point of the centerline with path.sample, path.position and path.heading."
+)
+_CARTESIAN_TASK = "start from path.position(s) and add e_y along the left normal."
 
 
 def _side(d: float) -> str:
@@ -57,43 +73,60 @@ def check_frenet_projection(frenet_projection) -> CheckResult:
 
     ``s`` (m, in [0, length)) is the arc length of the centerline point closest to (x, y) and
     ``e_y`` (m) the signed distance to it, positive to the left. Compared with
-    :meth:`racing_lib.geometry.Path.to_frenet` on ten points of the expressway to 1 mm.
+    :meth:`racing_lib.geometry.Path.to_frenet` on eleven points of the expressway to 1 mm.
     """
+
+    def check_case(case: tuple[float, float]) -> None:
+        track = _track()
+        path = track.centerline
+        s0, e0 = case
+        x, y, _ = path.to_cartesian(s0, e0)
+        s_exp, ey_exp, _ = path.to_frenet(x, y)
+        where = f"at (x, y) = ({x:.1f}, {y:.1f}) m"
+        s_got, ey_got = as_tuple(call(frenet_projection, path, x, y), 2, "frenet_projection")
+        s_got = as_float(s_got, "s")
+        ey_got = as_float(ey_got, "e_y")
+
+        # s is compared modulo the lap: 0 m and the lap length are the same point.
+        length = path.length
+        ds = (s_got - s_exp + 0.5 * length) % length - 0.5 * length
+        if abs(ds) > 1e-3:
+            ahead = "further along the track than" if ds > 0 else "behind"
+            msg = (
+                f"{where} your projection puts the car {abs(ds):.2f} m {ahead} where it is "
+                f"(expected s = {s_exp:.2f} m, got {s_got:.2f} m)."
+            )
+            near_line = min(s_exp, length - s_exp) < 20.0
+            telling, hint = 0.0, ""
+            if near_line and min(abs(s_got), abs(s_got - length)) < 1e-3 + abs(ds):
+                telling = 2.0
+                hint = (
+                    "This point is near the start line, where s wraps from the lap length back "
+                    "to 0: let the search cross the line (take s modulo the lap length instead "
+                    "of clipping it to [0, length])."
+                )
+            elif abs(ds) > 20.0:
+                telling = 1.0
+                hint = "That is another part of the track: search the whole lap first."
+            elif abs(ds) > 0.01:
+                hint = "Close: refine s so that (x, y) - r(s) is normal to the track."
+            raise Wrong(msg, telling, hint)
+        if differs(ey_got, ey_exp, tol=1e-3):
+            d = ey_got - ey_exp
+            msg = (
+                f"{where} your projection puts the car {abs(d):.2f} m {_side(d)} of where it "
+                f"is (expected e_y = {ey_exp:.2f} m, got {ey_got:.2f} m)."
+            )
+            if not differs(-ey_got, ey_exp, tol=1e-3):
+                hint = "Only the sign is off: e_y is positive LEFT of the direction of travel."
+                raise Wrong(msg, 2.0, hint)
+            raise Wrong(msg)
 
     def body() -> str:
         track = _track()
-        path = track.centerline
-        for s0, e0 in _cases(path, track):
-            x, y, _ = path.to_cartesian(s0, e0)
-            s_exp, ey_exp, _ = path.to_frenet(x, y)
-            where = f"at (x, y) = ({x:.1f}, {y:.1f}) m"
-            s_got, ey_got = as_tuple(call(frenet_projection, path, x, y), 2, "frenet_projection")
-            s_got = as_float(s_got, "s")
-            ey_got = as_float(ey_got, "e_y")
-
-            # s is compared modulo the lap: 0 m and the lap length are the same point.
-            ds = (s_got - s_exp + 0.5 * path.length) % path.length - 0.5 * path.length
-            if abs(ds) > 1e-3:
-                ahead = "further along the track than" if ds > 0 else "behind"
-                msg = (
-                    f"{where} your projection puts the car {abs(ds):.2f} m {ahead} where it is "
-                    f"(expected s = {s_exp:.2f} m, got {s_got:.2f} m)."
-                )
-                if abs(ds) > 20.0:
-                    msg += " That is another part of the track: search the whole lap first."
-                elif abs(ds) > 0.01:
-                    msg += " Close: refine s so that (x, y) - r(s) is normal to the track."
-                raise Wrong(msg)
-            if differs(ey_got, ey_exp, tol=1e-3):
-                d = ey_got - ey_exp
-                msg = (
-                    f"{where} your projection puts the car {abs(d):.2f} m {_side(d)} of where it "
-                    f"is (expected e_y = {ey_exp:.2f} m, got {ey_got:.2f} m)."
-                )
-                if not differs(-ey_got, ey_exp, tol=1e-3):
-                    msg += " Only the sign is off: e_y is positive LEFT of the direction of travel."
-                raise Wrong(msg)
-        return "all ten points projected to within 1 mm, across the start line and in the corners."
+        refuse_library(frenet_projection, _FRENET_LIBRARY, _FRENET_TASK)
+        every_case(_cases(track.centerline, track), check_case)
+        return "all eleven points projected to within 1 mm, across the start line and in corners."
 
     return grade("1.1 Frenet projection", body, weight=2.0)
 
@@ -101,31 +134,37 @@ def check_frenet_projection(frenet_projection) -> CheckResult:
 def check_frenet_to_cartesian(frenet_to_cartesian) -> CheckResult:
     """Exercise 1.2: ``frenet_to_cartesian(path, s, e_y) -> (x, y)``.
 
-    Compared with :meth:`racing_lib.geometry.Path.to_cartesian` on ten points to 1 mm.
+    Compared with :meth:`racing_lib.geometry.Path.to_cartesian` on eleven points to 1 mm.
     """
+
+    def check_case(case: tuple[float, float]) -> None:
+        path = _track().centerline
+        s0, e0 = case
+        x_exp, y_exp, _ = path.to_cartesian(s0, e0)
+        got = as_tuple(call(frenet_to_cartesian, path, s0, e0), 2, "frenet_to_cartesian")
+        x_got, y_got = as_float(got[0], "x"), as_float(got[1], "y")
+        miss = math.hypot(x_got - x_exp, y_got - y_exp)
+        if miss > 1e-3:
+            msg = (
+                f"for s = {s0:.1f} m, e_y = {e0:.2f} m your point lies {miss:.2f} m from where "
+                f"the car is (expected (x, y) = ({x_exp:.2f}, {y_exp:.2f}) m, got "
+                f"({x_got:.2f}, {y_got:.2f}) m)."
+            )
+            x_m, y_m, _ = path.to_cartesian(s0, -e0)
+            x_c, y_c = path.position(s0)
+            if math.hypot(x_got - x_m, y_got - y_m) < 1e-3:
+                hint = "It is on the wrong side: the normal (-sin psi, cos psi) points left."
+                raise Wrong(msg, 2.0, hint)
+            if math.hypot(x_got - x_c, y_got - y_c) < 1e-3:
+                hint = "That is the centerline point: add e_y times the left normal."
+                raise Wrong(msg, 2.0, hint)
+            raise Wrong(msg)
 
     def body() -> str:
         track = _track()
-        path = track.centerline
-        for s0, e0 in _cases(path, track):
-            x_exp, y_exp, _ = path.to_cartesian(s0, e0)
-            got = as_tuple(call(frenet_to_cartesian, path, s0, e0), 2, "frenet_to_cartesian")
-            x_got, y_got = as_float(got[0], "x"), as_float(got[1], "y")
-            miss = math.hypot(x_got - x_exp, y_got - y_exp)
-            if miss > 1e-3:
-                msg = (
-                    f"for s = {s0:.1f} m, e_y = {e0:.2f} m your point lies {miss:.2f} m from where "
-                    f"the car is (expected (x, y) = ({x_exp:.2f}, {y_exp:.2f}) m, got "
-                    f"({x_got:.2f}, {y_got:.2f}) m)."
-                )
-                x_m, y_m, _ = path.to_cartesian(s0, -e0)
-                x_c, y_c = path.position(s0)
-                if math.hypot(x_got - x_m, y_got - y_m) < 1e-3:
-                    msg += " It is on the wrong side: the normal (-sin psi, cos psi) points left."
-                elif math.hypot(x_got - x_c, y_got - y_c) < 1e-3:
-                    msg += " That is the centerline point: add e_y times the left normal."
-                raise Wrong(msg)
-        return "all ten points placed to within 1 mm."
+        refuse_library(frenet_to_cartesian, _FRENET_LIBRARY, _CARTESIAN_TASK)
+        every_case(_cases(track.centerline, track), check_case)
+        return "all eleven points placed to within 1 mm."
 
     return grade("1.2 Frenet to Cartesian", body, weight=1.0)
 

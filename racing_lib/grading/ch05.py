@@ -12,6 +12,7 @@ Exercise notebook: ``exercises/05_mpc.ipynb``. Every check compares the reader's
 from __future__ import annotations
 
 import functools
+from typing import Any
 
 import numpy as np
 
@@ -23,7 +24,9 @@ from racing_lib.grading.grader import (
     as_tuple,
     call,
     differs,
+    every_case,
     grade,
+    refuse_library,
 )
 
 __all__ = ["check_heuristic_trajectory", "check_pedal_inversion", "check_steering_lag"]
@@ -108,27 +111,43 @@ def check_steering_lag(steering_lag) -> CheckResult:
     """
     from racing_lib.control.mpc import steering_lag_coefficients
 
+    def check_case(case: tuple[float, float]) -> None:
+        tau, dt = case
+        a_exp, w_exp = steering_lag_coefficients(tau, dt)
+        a, w = as_tuple(call(steering_lag, tau, dt), 2, "steering_lag")
+        a, w = as_float(a, "a"), as_float(w, "w")
+        actuator = f"with a lag of tau = {tau * 1000:.0f} ms and a period of {dt * 1000:.0f} ms"
+        if differs(a, a_exp, tol=1e-12, rel=1e-9):
+            raise Wrong(
+                f"{actuator}, your wheels cover {1 - a:.1%} of the way to a new command in "
+                f"one period; the actuator covers {1 - a_exp:.1%} (expected a = {a_exp:.6f}, "
+                f"got {a:.6f}).",
+                hint="Solve delta_dot = (delta_cmd - delta) / tau over dt exactly.",
+            )
+        if differs(w, w_exp, tol=1e-12, rel=1e-9):
+            raise Wrong(
+                f"{actuator}, your mean steering angle over the period keeps {w:.1%} of the "
+                f"old angle; the actuator keeps {w_exp:.1%} (expected w = {w_exp:.6f}, got "
+                f"{w:.6f}).",
+                hint="Average the exponential over the period: w = tau / dt (1 - a).",
+            )
+
     def body() -> str:
-        for tau, dt in ((0.08, 0.1), (0.2, 0.1), (0.05, 0.05), (0.3, 0.02)):
-            a_exp, w_exp = steering_lag_coefficients(tau, dt)
-            a, w = as_tuple(call(steering_lag, tau, dt), 2, "steering_lag")
-            a, w = as_float(a, "a"), as_float(w, "w")
-            actuator = f"with a lag of tau = {tau * 1000:.0f} ms and a period of {dt * 1000:.0f} ms"
-            if differs(a, a_exp, tol=1e-12, rel=1e-9):
-                raise Wrong(
-                    f"{actuator}, your wheels cover {1 - a:.1%} of the way to a new command in "
-                    f"one period; the actuator covers {1 - a_exp:.1%} (expected a = {a_exp:.6f}, "
-                    f"got {a:.6f}). Solve delta_dot = (delta_cmd - delta) / tau over dt exactly."
-                )
-            if differs(w, w_exp, tol=1e-12, rel=1e-9):
-                raise Wrong(
-                    f"{actuator}, your mean steering angle over the period keeps {w:.1%} of the "
-                    f"old angle; the actuator keeps {w_exp:.1%} (expected w = {w_exp:.6f}, got "
-                    f"{w:.6f}). Average the exponential over the period: w = tau / dt (1 - a)."
-                )
+        refuse_library(
+            steering_lag,
+            {"steering_lag_coefficients": steering_lag_coefficients},
+            "solve the lag's differential equation over one period.",
+        )
+        every_case(((0.08, 0.1), (0.2, 0.1), (0.05, 0.05), (0.3, 0.02)), check_case)
         return "the lag coefficients agree with the controller's for slow and fast actuators."
 
     return grade("5.2 Steering lag", body, weight=1.0)
+
+
+def _pedal_by_sign_of_a_x(pedal_map: Any, a_x: float, coasting: float) -> float:
+    """The tempting mistake: the slope chosen by the sign of a_x instead of a_x - coasting."""
+    slope = pedal_map.m_thr if a_x >= 0 else pedal_map.m_brk
+    return float(np.clip((a_x - coasting) / slope, -1.0, 1.0))
 
 
 def check_pedal_inversion(pedal_for) -> CheckResult:
@@ -136,41 +155,66 @@ def check_pedal_inversion(pedal_for) -> CheckResult:
 
     The inverse of the pedal map of Appendix C, compared with
     :meth:`racing_lib.model.PedalMap.pedal` (1e-9), including requests beyond full throttle or
-    full brake (which must be clipped).
+    full brake (which must be clipped), a light deceleration that drag and rolling resistance
+    overshoot at speed (throttle, although a_x < 0) and a light acceleration that the coasting
+    term exceeds at low speed (brake, although a_x > 0). An answer that calls ``pedal_map.pedal``
+    is refused.
     """
     from racing_lib.model import PedalMap
 
     pedal_map = PedalMap(m_0=0.8, m_xi=(-0.05, 0.0, 0.0, 0.0, 0.0, 0.0), m_thr=3.5, m_brk=10.0)
-    cases = [(40.0, 1.0), (40.0, -6.0), (20.0, 0.0), (15.0, 5.0), (50.0, -15.0), (30.0, -0.7)]
+    # (v_x m/s, a_x m/s^2); coasting gives 0.8 - 0.05 v_x: -1.2 at 40 m/s, +0.55 at 5 m/s.
+    cases = [(40.0, 1.0), (40.0, -6.0), (20.0, 0.0), (15.0, 5.0), (50.0, -15.0), (30.0, -0.7),
+             (40.0, -0.5), (5.0, 0.3)]  # fmt: skip
+
+    def check_case(case: tuple[float, float]) -> None:
+        v_x, a_x = case
+        xi = np.array([v_x, 0.0, 0.0, 0.0, 0.0, 0.0])
+        expected = float(pedal_map.pedal(a_x, xi))
+        got = as_float(call(pedal_for, pedal_map, a_x, xi.copy()), "pedal_for")
+        if not differs(got, expected, tol=1e-9):
+            return
+        doing = f"{'accelerate' if a_x > 0 else 'brake'} at {abs(a_x):.1f} m/s^2"
+        if a_x == 0.0:
+            doing = "hold the speed"
+        coasting = pedal_map.m_0 + float(np.dot(pedal_map.m_xi, xi))
+        msg = (
+            f"to {doing} at {v_x:.0f} m/s your driver sets the pedal to {got:+.3f}; the "
+            f"map needs {expected:+.3f} (expected u_p = {expected:.4f}, got {got:.4f})."
+        )
+        telling, hint = 0.0, ""
+        if abs(expected) == 1.0 and abs(got) > 1.0:
+            telling, hint = 1.0, "The pedal ends at +-1: clip requests the car cannot meet."
+        elif not differs(got, _pedal_by_sign_of_a_x(pedal_map, a_x, coasting), tol=1e-9):
+            pedal = "throttle" if expected > 0 else "brake"
+            telling = 2.0
+            hint = (
+                f"With the pedal released the car already does {coasting:+.2f} m/s^2 here, so "
+                f"{a_x:+.1f} m/s^2 needs {pedal}: choose throttle or brake by the sign of "
+                "a_x - (m_0 + m_xi . xi), not by the sign of a_x."
+            )
+        elif not differs(
+            got,
+            np.clip(a_x / (pedal_map.m_thr if a_x >= 0 else pedal_map.m_brk), -1, 1),
+            tol=1e-9,
+        ):
+            telling = 1.0
+            hint = (
+                "The car accelerates by m_0 + m_xi . xi with the pedal released; "
+                "the pedal only has to add the difference."
+            )
+        raise Wrong(msg, telling, hint)
 
     def body() -> str:
-        for v_x, a_x in cases:
-            xi = np.array([v_x, 0.0, 0.0, 0.0, 0.0, 0.0])
-            expected = float(pedal_map.pedal(a_x, xi))
-            got = as_float(call(pedal_for, pedal_map, a_x, xi.copy()), "pedal_for")
-            if differs(got, expected, tol=1e-9):
-                doing = f"{'accelerate' if a_x > 0 else 'brake'} at {abs(a_x):.1f} m/s^2"
-                msg = (
-                    f"to {doing} at {v_x:.0f} m/s your driver sets the pedal to {got:+.3f}; the "
-                    f"map needs {expected:+.3f} (expected u_p = {expected:.4f}, got {got:.4f})."
-                )
-                if abs(expected) == 1.0 and abs(got) > 1.0:
-                    msg += " The pedal ends at +-1: clip requests the car cannot meet."
-                elif not differs(
-                    got,
-                    np.clip(a_x / (pedal_map.m_thr if a_x >= 0 else pedal_map.m_brk), -1, 1),
-                    tol=1e-9,
-                ):
-                    msg += (
-                        " The car accelerates by m_0 + m_xi . xi with the pedal released; "
-                        "the pedal only has to add the difference."
-                    )
-                elif (got >= 0) != (expected >= 0):
-                    msg += (
-                        " Coasting (u_p = 0) already gives m_0 + m_xi . xi; compare a_x with that "
-                        "to choose throttle or brake."
-                    )
-                raise Wrong(msg)
-        return "your pedal inversion agrees with PedalMap.pedal, clipping included."
+        refuse_library(
+            pedal_for,
+            {"pedal": PedalMap.pedal},
+            "invert the map from its coefficients m_0, m_xi, m_thr and m_brk.",
+        )
+        every_case(cases, check_case)
+        return (
+            "your pedal inversion agrees with PedalMap.pedal, clipping included, also where "
+            "the coasting term decides between throttle and brake."
+        )
 
     return grade("5.3 Pedal from acceleration", body, weight=1.0)

@@ -5,6 +5,10 @@ cases, compares the answers with what :mod:`racing_lib` computes for the same ca
 a :class:`CheckResult` whose text says, in physical terms, what is right or wrong ("your
 projection puts the car 0.80 m left of where it is (expected e_y = 1.20 m, got 2.00 m)").
 
+A check runs every case and reports every one that fails (:func:`every_case`), the most telling
+first: the one whose message names the mistake. An exercise that rebuilds a library function
+refuses an answer that calls it (:func:`refuse_library`).
+
 A function that raises :class:`NotImplementedError` or returns ``None`` (the state of every
 template) is reported as "not done yet", never as an error. A function that crashes is reported
 with the exception and the case that triggered it. Each check has a weight (for a score) and a
@@ -28,7 +32,8 @@ import math
 import signal
 import threading
 import time
-from collections.abc import Callable, Iterable
+import types
+from collections.abc import Callable, Iterable, Mapping
 from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Any, Literal
@@ -46,8 +51,10 @@ __all__ = [
     "as_tuple",
     "call",
     "differs",
+    "every_case",
     "expect_close",
     "grade",
+    "refuse_library",
     "score",
 ]
 
@@ -68,7 +75,26 @@ class NotDone(Exception):
 
 
 class Wrong(Exception):
-    """The reader's answer is wrong; the message says how, in physical terms."""
+    """The reader's answer is wrong; the message says how, in physical terms.
+
+    Parameters
+    ----------
+    message : str
+        What differs, with units.
+    telling : float
+        Rank among several failing cases (:func:`every_case`): higher comes first. A check gives
+        a case whose hint names the mistake a higher rank than one that only says the numbers
+        differ.
+    hint : str
+        What mistake gives that answer and what to do; :func:`every_case` says each distinct
+        hint once.
+    """
+
+    def __init__(self, message: str, telling: float = 0.0, hint: str = "") -> None:
+        super().__init__(f"{message} {hint}".strip())
+        self.fact = message
+        self.hint = hint
+        self.telling = float(telling)
 
 
 class _StudentCrash(Exception):
@@ -230,6 +256,101 @@ def expect_close(
     if differs(got, expected, tol=tol, rel=rel):
         g, e = float(got), float(expected)
         raise Wrong(message.format(expected=e, got=g, diff=g - e, absdiff=abs(g - e)))
+
+
+def every_case(cases: Iterable[Any], check_case: Callable[[Any], None]) -> None:
+    """Run ``check_case`` on every case; raise one :class:`Wrong` that reports each failure.
+
+    The message starts with the most telling failure (highest :attr:`Wrong.telling`, then the
+    first in case order) and lists the others below it, so that a reader sees at once whether a
+    mistake is systematic or confined to some cases (near the start line, under braking...).
+    A case that crashes or is not done yet stops the check as before.
+    """
+    failures: list[tuple[float, int, Wrong]] = []
+    cases = list(cases)
+    for k, case in enumerate(cases):
+        try:
+            check_case(case)
+        except Wrong as exc:
+            failures.append((-exc.telling, k, exc))
+    if not failures:
+        return
+    failures.sort(key=lambda item: item[:2])
+    first = failures[0][2]
+    if len(failures) == 1:
+        raise first
+    said = {first.hint}
+    lines = []
+    for _, _, exc in failures[1:]:
+        lines.append(f"  - {exc.fact}" + ("" if exc.hint in said else f" {exc.hint}"))
+        said.add(exc.hint)
+    text = str(first)
+    text = text[:1].upper() + text[1:] if "_" not in text.split(" ", 1)[0] else text
+    others = "\n".join(lines)
+    raise Wrong(f"{len(failures)} of {len(cases)} cases are wrong. {text}\nAlso:\n{others}")
+
+
+def _module_of(obj: Any) -> str:
+    return getattr(obj, "__module__", None) or ""
+
+
+def _names_used(fn: Callable[..., Any], depth: int = 3) -> list[tuple[str, Any]]:
+    """(name, bound object or None) of the globals, attributes and closure variables of ``fn``.
+
+    Follows the reader's own helper functions (any function not from racing_lib) ``depth`` deep.
+    """
+    code = getattr(fn, "__code__", None)
+    if code is None:
+        return []
+    globals_ = getattr(fn, "__globals__", {})
+    names: set[str] = set()
+
+    def walk(c: types.CodeType) -> None:
+        names.update(c.co_names)
+        for const in c.co_consts:
+            if isinstance(const, types.CodeType):
+                walk(const)
+
+    walk(code)
+    used = [(name, globals_.get(name)) for name in sorted(names)]
+    # Names the function closes over (a function defined inside another one).
+    for name, cell in zip(code.co_freevars, getattr(fn, "__closure__", None) or (), strict=False):
+        try:
+            used.append((name, cell.cell_contents))
+        except ValueError:  # a cell not filled yet
+            continue
+    if depth > 0:
+        for _, obj in list(used):
+            if isinstance(obj, types.FunctionType) and obj is not fn:
+                if not _module_of(obj).startswith("racing_lib"):
+                    used += _names_used(obj, depth - 1)
+    return used
+
+
+def refuse_library(fn: Callable[..., Any], forbidden: Mapping[str, Any], task: str) -> None:
+    """Raise :class:`Wrong` when the reader's function calls what the exercise asks them to write.
+
+    Parameters
+    ----------
+    fn : callable
+        The reader's function.
+    forbidden : mapping
+        Name -> library object. The answer is refused when it uses the name as an attribute or a
+        global (``path.to_frenet``, ``pedal_map.pedal``), or any global bound to the object
+        (``from racing_lib... import steering_lag_coefficients as f``). ``None`` matches the name
+        only.
+    task : str
+        What the reader is asked to do instead, for the message.
+    """
+    for name, obj in _names_used(fn):
+        # A global of the reader's own that happens to share the name is not the library's.
+        library_name = obj is None or _module_of(obj).startswith("racing_lib")
+        for label, target in forbidden.items():
+            if (name == label and library_name) or (target is not None and obj is target):
+                raise Wrong(
+                    f"your function calls the library's {label}, which is what this exercise "
+                    f"asks you to write: {task}"
+                )
 
 
 @contextmanager
