@@ -41,6 +41,7 @@ class Exercise:
     solution: str  # the function body (indented by four spaces)
     check: str  # the call of the check, e.g. "check_frenet_projection(frenet_projection)"
     after: str = ""  # optional code cell after the check (uses the reader's function)
+    template: str = ""  # the template's body when it gives a start (default: TODO only)
 
 
 @dataclass
@@ -282,16 +283,23 @@ CH03 = Chapter(
 the current line, and a QP that bends the line to lower its curvature, linearized around steady
 cornering at that speed. Here you write three of the pieces: the friction limit on speed in a
 corner, the lap time of a speed profile, and the steady-cornering state the QP linearizes around.
-The checks compare with `racing_lib.planning` on the expressway.""",
+Then you write a curvature QP of your own, in cvxpy, for an oval. The checks compare with
+`racing_lib.planning` on the expressway, and your QP's line with the optimum found by another
+method.""",
     imports="""import math
 
+import cvxpy as cp
+import matplotlib.pyplot as plt
 import numpy as np
 
 import racing_lib.face.notebook
 from racing_lib.grading.ch03 import (
     check_cornering_speed,
     check_lap_time,
+    check_min_curvature_qp,
     check_steady_cornering,
+    line_curvature,
+    oval_track,
 )""",
     exercises=[
         Exercise(
@@ -352,6 +360,58 @@ The cases of the check stay below the friction limit, so the arcsine exists.""",
     return v_y, r, delta""",
             check="check_steady_cornering(steady_state)",
         ),
+        Exercise(
+            markdown="""## Exercise 3.4 · Write the curvature QP yourself
+
+Chapter 03's QP bends the line to lower its curvature. Strip it to its core and write it yourself,
+for an oval: two 200 m straights joined by two bends of radius 60 m, 8 m wide, sampled every
+$\\Delta s \\approx 2$ m (`oval = oval_track()`: `oval.s`, `oval.kappa`, `oval.ds`,
+`oval.half_width`). The line is the lateral offset $n_k$ (m, left positive) of the centerline at each
+node. For small offsets its curvature is, to first order,
+
+$$\\kappa_k \\approx \\kappa_{c,k} + \\frac{n_{k+1} - 2 n_k + n_{k-1}}{\\Delta s^2}$$
+
+(`line_curvature(oval, n)` evaluates it), with the indices wrapping round the loop: node $N$ is node
+0. Find the line of least squared curvature that keeps a margin $m$ to both edges:
+
+$$\\min_{n}\\ \\sum_{k} \\kappa_k^2\\, \\Delta s \\quad \\text{s.t.}\\quad
+|n_k| \\le w - m .$$
+
+The cost is a sum of squares of expressions linear in $n$, and the bounds are linear: a QP. Write it
+with `cvxpy` (a `cp.Variable`, `cp.sum_squares`, `cp.Problem(...).solve()`) and return the
+offsets as a NumPy array. The check runs two margins and compares the cost of your line with the
+optimum found by another method.""",
+            header='''def min_curvature_line(oval, margin):
+    """Offsets n (N,), m, of the least-curved line round the oval within half_width - margin."""''',
+            solution="""    n = cp.Variable(oval.s.size)
+    # Neighbours round the loop: the node after the last is the first, and the other way round.
+    after = cp.hstack([n[1:], n[:1]])
+    before = cp.hstack([n[-1:], n[:-1]])
+    kappa = oval.kappa + (after - 2 * n + before) / oval.ds**2
+    bound = oval.half_width - margin
+    problem = cp.Problem(cp.Minimize(cp.sum_squares(kappa) * oval.ds), [cp.abs(n) <= bound])
+    problem.solve()
+    return n.value""",
+            check="check_min_curvature_qp(min_curvature_line)",
+            after="""# The line you found: outside before each bend, the apex inside, outside again after it.
+oval = oval_track()
+try:
+    n = min_curvature_line(oval, 0.5)
+except NotImplementedError:
+    n = np.zeros_like(oval.s)
+    print("(min_curvature_line is not written yet: the centerline is shown instead)")
+fig, ax = plt.subplots(2, 1, figsize=(7, 4), sharex=True)
+ax[0].plot(oval.s, n)
+ax[0].axhline(oval.half_width - 0.5, color="k", lw=0.8)
+ax[0].axhline(-(oval.half_width - 0.5), color="k", lw=0.8)
+ax[0].set_ylabel("$n$ [m]")
+ax[1].plot(oval.s, oval.kappa, label="centerline")
+ax[1].plot(oval.s, line_curvature(oval, n), label="your line")
+ax[1].set_ylabel(r"$\\kappa$ [1/m]")
+ax[1].set_xlabel("$s$ [m]")
+ax[1].legend()
+plt.show()""",
+        ),
     ],
 )
 
@@ -364,14 +424,21 @@ CH04 = Chapter(
     intro="""Chapter 04 replaced the curvature proxy by the lap time itself, written as an integral
 over the centerline's arc length so that the NLP has a fixed horizon. Here you write that
 objective, and the bound on the slip angles that keeps the planned tyres on the stable side of
-their force peak. The checks compare with `racing_lib.planning.time_optimal` and
-`racing_lib.model`.""",
+their force peak. Then you write and solve a minimum-lap-time NLP of your own in CasADi, for a
+point mass on an oval. The checks compare with `racing_lib.planning.time_optimal` and
+`racing_lib.model`, and your NLP's lap with the optimum found by another method.""",
     imports="""import math
 
+import casadi as ca
 import numpy as np
 
 import racing_lib.face.notebook
-from racing_lib.grading.ch04 import check_peak_slip_angle, check_spatial_lap_time""",
+from racing_lib.grading.ch03 import oval_track
+from racing_lib.grading.ch04 import (
+    check_min_time_nlp,
+    check_peak_slip_angle,
+    check_spatial_lap_time,
+)""",
     exercises=[
         Exercise(
             markdown="""## Exercise 4.1 · Lap time in the spatial domain
@@ -404,6 +471,43 @@ is $\\pi/2$; solve for $\\alpha$.""",
             solution="""    return math.tan(math.pi / (2.0 * C)) / B""",
             check="check_peak_slip_angle(peak_slip_angle)",
         ),
+        Exercise(
+            markdown="""## Exercise 4.3 · A minimum-time NLP of your own
+
+Write the chapter's NLP in miniature: a point mass on the oval of exercise 3.4 (`oval_track()`),
+driving its centerline. Its decision variables are the speed $v_k$ at each node and the
+acceleration $a_k$ on the interval to the next node, over which it is constant, so
+
+$$v_{k+1}^2 = v_k^2 + 2\\, a_k\\, \\Delta s \\qquad (\\text{node } N \\text{ is node } 0:
+\\text{a flying lap}).$$
+
+The tyres give a total acceleration of at most `grip` (m/s$^2$) in any direction, shared between
+braking or driving and cornering, and the car tops out at `v_top`:
+
+$$\\Big(\\frac{a_k}{a_\\text{grip}}\\Big)^2 + \\Big(\\frac{v_k^2\\,\\kappa_k}{a_\\text{grip}}\\Big)^2
+\\le 1, \\qquad 1 \\le v_k \\le v_\\text{top}.$$
+
+Minimize the lap time $T = \\sum_k 2\\,\\Delta s / (v_k + v_{k+1})$ with `casadi.Opti`
+(`opti.variable`, `opti.minimize`, `opti.subject_to`, `opti.solver("ipopt")`, `opti.solve()`).
+Start it from a constant 10 m/s: the cold start works here, as chapter 04 found for its NLP.
+The check compares your lap with the optimum of the same problem written as a convex program in
+$w = v^2$, in which the dynamics are linear and the lap time convex.""",
+            header='''def min_time_speeds(oval, grip, v_top):
+    """Node speeds v (N,), m/s, of the fastest lap of a point mass round the oval."""''',
+            solution="""    n = oval.s.size
+    opti = ca.Opti()
+    v = opti.variable(n)
+    a = opti.variable(n)
+    v_next = ca.vertcat(v[1:], v[0])  # the lap closes: after the last node comes the first
+    opti.minimize(ca.sum1(2 * oval.ds / (v + v_next)))
+    opti.subject_to(v_next**2 == v**2 + 2 * a * oval.ds)
+    opti.subject_to((a / grip) ** 2 + (v**2 * oval.kappa / grip) ** 2 <= 1)
+    opti.subject_to(opti.bounded(1.0, v, v_top))
+    opti.set_initial(v, 10.0)
+    opti.solver("ipopt", {"print_time": False}, {"print_level": 0, "sb": "yes"})
+    return opti.solve().value(v)""",
+            check="check_min_time_nlp(min_time_speeds)",
+        ),
     ],
 )
 
@@ -416,17 +520,21 @@ CH05 = Chapter(
     intro="""Chapter 05 tracks the plan with a model-predictive controller that linearizes the model
 along a *heuristic trajectory* and solves one QP per control period. Here you write that trajectory,
 the discrete model of the steering actuator the QP carries, and the last step from the planned
-acceleration to a pedal position. The checks compare with `racing_lib.control.mpc` and
-`racing_lib.model`.""",
+acceleration to a pedal position. Then you write a tracking MPC's QP yourself, for the lateral
+errors of a car. The checks compare with `racing_lib.control.mpc` and `racing_lib.model`, and
+your QP's commands with the optimum found by another method.""",
     imports="""import math
 
+import cvxpy as cp
 import numpy as np
 
 import racing_lib.face.notebook
 from racing_lib.grading.ch05 import (
     check_heuristic_trajectory,
+    check_lateral_mpc,
     check_pedal_inversion,
     check_steering_lag,
+    lateral_mpc_problem,
 )""",
     exercises=[
         Exercise(
@@ -481,6 +589,54 @@ beyond full throttle or full brake are clipped to $\\pm 1$. The map's coefficien
     return float(np.clip(u_p, -1.0, 1.0))""",
             check="check_pedal_inversion(pedal_for)",
         ),
+        Exercise(
+            markdown="""## Exercise 5.4 · A tracking QP of your own
+
+The coupled MPC builds one QP per period from a linear model, a tracking cost and bounds. Build one
+yourself for the lateral part alone. A car at 20 m/s follows its line with errors
+$x = (e_y, e_\\psi)$ and steers with $\\delta$; over one period the kinematic model gives
+
+$$x_{k+1} = A\\, x_k + B\\, \\delta_k + d_k, \\qquad k = 0, \\dots, N-1,$$
+
+where $d_k$ is what the line's curvature does to the errors (`problem.A`, `problem.B`, `problem.d`
+with one row per stage, and the measured errors `problem.x0`). Choose the $N$ commands that
+minimize
+
+$$\\sum_{k=1}^{N} \\big(q_y\\, e_{y,k}^2 + q_\\psi\\, e_{\\psi,k}^2\\big)
+\\;+\\; r \\sum_{k=0}^{N-1} (\\delta_k - \\delta_{k-1})^2
+\\quad\\text{s.t.}\\quad |\\delta_k| \\le \\delta_\\max,$$
+
+with $\\delta_{-1}$ the command the car has now (`problem.q`, `problem.r`, `problem.delta_prev`,
+`problem.delta_max`). Write it with the states and the commands both as cvxpy variables and the
+model as equality constraints, the *sparse* form the library hands to OSQP. The check tries three
+situations and compares the cost of your commands, simulated through the model, with the optimum
+found by another method.""",
+            header='''def mpc_steering(problem):
+    """The N optimal steering commands (rad) of the lateral tracking QP `problem`."""''',
+            solution="""    n = problem.d.shape[0]
+    x = cp.Variable((n + 1, 2))  # predicted errors, stages 0..N
+    delta = cp.Variable(n)
+    steps = cp.hstack([delta[:1] - problem.delta_prev, delta[1:] - delta[:-1]])
+    cost = cp.sum(cp.square(x[1:]) @ problem.q) + problem.r * cp.sum_squares(steps)
+    model = [x[0] == problem.x0]
+    model += [x[k + 1] == problem.A @ x[k] + problem.B * delta[k] + problem.d[k] for k in range(n)]
+    bounds = [cp.abs(delta) <= problem.delta_max]
+    cp.Problem(cp.Minimize(cost), model + bounds).solve()
+    return delta.value""",
+            check="check_lateral_mpc(mpc_steering)",
+            after="""# Your MPC's plan when the car is 1 m left of a line that turns left after 0.8 s.
+problem = lateral_mpc_problem((1.0, 0.02), 0.0, np.r_[np.zeros(8), np.full(17, 1 / 80)])
+try:
+    delta = mpc_steering(problem)
+except NotImplementedError:
+    delta = np.zeros(problem.d.shape[0])
+    print("(mpc_steering is not written yet: straight steering is shown instead)")
+x = [problem.x0]
+for k, u in enumerate(delta):
+    x.append(problem.A @ x[-1] + problem.B * u + problem.d[k])
+print("first commands [rad]:", np.round(delta[:5], 4))
+print("predicted e_y [m]:   ", np.round(np.array(x)[:6, 0], 3))""",
+        ),
     ],
 )
 
@@ -494,11 +650,21 @@ CH06 = Chapter(
 lap. Here you write that score, the paper's tuning objective, and the map from CMA-ES's search
 space (logarithms of the weights) to the weights themselves. The checks compare with
 `racing_lib.experiments.tuning` on laps made up for the exercise (`racing_lib.grading.ch06.synthetic_lap`), so
-no simulation is needed.""",
-    imports="""import numpy as np
+no simulation is needed. Last, you write CMA-ES itself and watch it solve a problem that a search
+without its covariance update cannot.""",
+    imports="""import math
+
+import numpy as np
 
 import racing_lib.face.notebook
-from racing_lib.grading.ch06 import check_search_space, check_tuning_objective, synthetic_lap""",
+from racing_lib.grading.ch06 import (
+    CMA_BUDGET,
+    check_cma_es,
+    check_search_space,
+    check_tuning_objective,
+    rotated_ellipsoid,
+    synthetic_lap,
+)""",
     exercises=[
         Exercise(
             markdown="""## Exercise 6.1 · The tuning objective
@@ -542,6 +708,100 @@ has `space.names`, `space.lower` and `space.upper` (in the weights' own units). 
     x = np.clip(np.asarray(x, dtype=float), lo, hi)
     return {name: float(10.0**v) for name, v in zip(space.names, x, strict=True)}""",
             check="check_search_space(to_params)",
+        ),
+        Exercise(
+            markdown="""## Exercise 6.3 · CMA-ES, written by you
+
+Chapter 06 uses pycma. Write the algorithm's loop yourself, following the five steps of the
+chapter: each generation
+
+1. **samples** $\\lambda$ candidates $x_i = m + \\sigma\\, y_i$, $y_i = B D z_i$ with
+   $z_i \\sim \\mathcal N(0, I)$ and $C = B D^2 B^\\top$ (`np.linalg.eigh`);
+2. **evaluates** them and **sorts** them by cost;
+3. **moves the mean** by the weighted average of the $\\mu$ best steps,
+   $y_w = \\sum_i w_i\\, y_{i:\\lambda}$, $m' = m + \\sigma\\, y_w$;
+4. **updates the two evolution paths**,
+   $p_\\sigma' = (1 - c_\\sigma)\\, p_\\sigma + \\sqrt{c_\\sigma (2 - c_\\sigma) \\mu_\\text{eff}}\\;
+   C^{-1/2} y_w$ and $p_c' = (1 - c_c)\\, p_c + \\sqrt{c_c (2 - c_c) \\mu_\\text{eff}}\\; y_w$,
+   and **reshapes the distribution**,
+   $C' = (1 - c_1 - c_\\mu)\\, C + c_1\\, p_c p_c^\\top + c_\\mu \\sum_i w_i\\, y_{i:\\lambda} y_{i:\\lambda}^\\top$;
+5. **adapts the step size**,
+   $\\sigma' = \\sigma \\exp\\big(\\tfrac{c_\\sigma}{d_\\sigma}
+   (\\lVert p_\\sigma \\rVert / \\mathbb E\\lVert \\mathcal N(0, I)\\rVert - 1)\\big)$.
+
+The template sets the default constants; write the loop, spend at most `budget` evaluations of
+`f`, and return the best point seen. The test problem, `rotated_ellipsoid()`, is a narrow valley
+whose axes differ a hundredfold in length and are tilted against the coordinates: only a search
+that learns $C$ solves it on the budget of the check.""",
+            header='''def cma_es(f, x0, sigma0, budget, seed):
+    """Best point found by CMA-ES minimizing f from x0 with step sigma0, in <= budget evaluations."""''',
+            template="""    rng = np.random.default_rng(seed)
+    n = len(x0)
+    # The default strategy parameters (Hansen's tutorial): population, weights, learning rates.
+    lam = 4 + int(3 * math.log(n))  # candidates per generation
+    mu = lam // 2  # how many of them are selected
+    w = math.log(mu + 0.5) - np.log(np.arange(1, mu + 1))
+    w /= w.sum()  # recombination weights, decreasing, sum 1
+    mu_eff = 1.0 / np.sum(w**2)
+    c_s = (mu_eff + 2) / (n + mu_eff + 5)  # step-size path
+    d_s = 1 + 2 * max(0.0, math.sqrt((mu_eff - 1) / (n + 1)) - 1) + c_s
+    c_c = (4 + mu_eff / n) / (n + 4 + 2 * mu_eff / n)  # covariance path
+    c_1 = 2 / ((n + 1.3) ** 2 + mu_eff)  # rank-one update
+    c_mu = min(1 - c_1, 2 * (mu_eff - 2 + 1 / mu_eff) / ((n + 2) ** 2 + mu_eff))  # rank-mu
+    chi_n = math.sqrt(n) * (1 - 1 / (4 * n) + 1 / (21 * n * n))  # E||N(0, I)||
+    m, sigma = np.array(x0, dtype=float), float(sigma0)
+    C, p_s, p_c = np.eye(n), np.zeros(n), np.zeros(n)
+    best_x, best_f = m.copy(), f(m)
+    used = 1
+    # YOUR CODE HERE: while used + lam <= budget: one generation (steps 1-5)
+    raise NotImplementedError""",
+            solution="""    rng = np.random.default_rng(seed)
+    n = len(x0)
+    # The default strategy parameters (Hansen's tutorial): population, weights, learning rates.
+    lam = 4 + int(3 * math.log(n))  # candidates per generation
+    mu = lam // 2  # how many of them are selected
+    w = math.log(mu + 0.5) - np.log(np.arange(1, mu + 1))
+    w /= w.sum()  # recombination weights, decreasing, sum 1
+    mu_eff = 1.0 / np.sum(w**2)
+    c_s = (mu_eff + 2) / (n + mu_eff + 5)  # step-size path
+    d_s = 1 + 2 * max(0.0, math.sqrt((mu_eff - 1) / (n + 1)) - 1) + c_s
+    c_c = (4 + mu_eff / n) / (n + 4 + 2 * mu_eff / n)  # covariance path
+    c_1 = 2 / ((n + 1.3) ** 2 + mu_eff)  # rank-one update
+    c_mu = min(1 - c_1, 2 * (mu_eff - 2 + 1 / mu_eff) / ((n + 2) ** 2 + mu_eff))  # rank-mu
+    chi_n = math.sqrt(n) * (1 - 1 / (4 * n) + 1 / (21 * n * n))  # E||N(0, I)||
+    m, sigma = np.array(x0, dtype=float), float(sigma0)
+    C, p_s, p_c = np.eye(n), np.zeros(n), np.zeros(n)
+    best_x, best_f = m.copy(), f(m)
+    used = 1
+    while used + lam <= budget:
+        values, vectors = np.linalg.eigh(C)
+        scale = np.sqrt(np.maximum(values, 1e-20))  # D
+        y = rng.standard_normal((lam, n)) * scale @ vectors.T  # y_i = B D z_i, one per row
+        x = m + sigma * y
+        costs = np.array([f(xi) for xi in x])
+        used += lam
+        order = np.argsort(costs)
+        if costs[order[0]] < best_f:
+            best_f, best_x = costs[order[0]], x[order[0]].copy()
+        y_sel = y[order[:mu]]
+        y_w = w @ y_sel
+        m = m + sigma * y_w
+        c_inv_half = vectors @ np.diag(1.0 / scale) @ vectors.T
+        p_s = (1 - c_s) * p_s + math.sqrt(c_s * (2 - c_s) * mu_eff) * (c_inv_half @ y_w)
+        p_c = (1 - c_c) * p_c + math.sqrt(c_c * (2 - c_c) * mu_eff) * y_w
+        C = (1 - c_1 - c_mu) * C + c_1 * np.outer(p_c, p_c) + c_mu * (y_sel.T * w) @ y_sel
+        sigma *= math.exp(c_s / d_s * (np.linalg.norm(p_s) / chi_n - 1))
+    return best_x""",
+            check="check_cma_es(cma_es)",
+            after="""# How your CMA-ES closes in: the best cost against the evaluations spent.
+f = rotated_ellipsoid()
+for budget in (300, 1000, CMA_BUDGET):
+    try:
+        x = cma_es(f, np.zeros(6), 1.0, budget, 0)
+    except NotImplementedError:
+        print("(cma_es is not written yet)")
+        break
+    print(f"{budget:5d} evaluations: f = {f(x):.2e}")""",
         ),
     ],
 )
@@ -587,7 +847,7 @@ def build(chapter: Chapter, solved: bool) -> nbformat.NotebookNode:
         cells.append(md(ex.markdown))
         if chapter is CH06 and ex is CH06.exercises[0]:
             cells.append(code(CH06_PEEK))
-        body = ex.solution if solved else TODO
+        body = ex.solution if solved else (ex.template or TODO)
         cells.append(code(f"{ex.header}\n{body}"))
         cells.append(code(f"{CHECK_MARK}\n{ex.check}"))
         if ex.after:

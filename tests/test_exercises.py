@@ -306,7 +306,7 @@ def test_pedal_chosen_by_the_sign_of_a_x():
     ids=["to_frenet", "to_cartesian", "pedal"],
 )
 def test_the_library_function_the_exercise_rebuilds_is_refused(check, answer):
-    _wrong(check(answer), "calls the library's", "asks you to write")
+    _wrong(check(answer), "calls ", "asks you to write yourself")
 
 
 def test_the_library_function_is_refused_under_another_name():
@@ -432,3 +432,143 @@ def test_score_weights_correct_answers_only():
     ok = grader.CheckResult("1", grader.CORRECT, "", weight=2.0)
     bad = grader.CheckResult("2", "wrong", "", weight=1.0)
     assert grader.score([ok, bad]) == (2.0, 3.0)
+
+
+# --------------------------------------------------------------------------------------------
+# The exercises that build the algorithms (3.4 QP, 4.3 NLP, 5.4 MPC QP, 6.3 CMA-ES)
+
+
+def test_curvature_qp_that_does_not_close_the_loop():
+    import cvxpy as cp
+
+    def open_loop(oval, margin):
+        n = cp.Variable(oval.s.size)
+        kappa = oval.kappa[1:-1] + (n[2:] - 2 * n[1:-1] + n[:-2]) / oval.ds**2
+        bound = oval.half_width - margin
+        cp.Problem(cp.Minimize(cp.sum_squares(kappa) * oval.ds), [cp.abs(n) <= bound]).solve()
+        return n.value
+
+    _wrong(ch03.check_min_curvature_qp(open_loop), "where the loop closes", "1/m")
+
+
+def test_curvature_qp_without_the_track_edges():
+    import cvxpy as cp
+
+    def unbounded(oval, margin):
+        n = cp.Variable(oval.s.size)
+        after, before = cp.hstack([n[1:], n[:1]]), cp.hstack([n[-1:], n[:-1]])
+        kappa = oval.kappa + (after - 2 * n + before) / oval.ds**2
+        # a whisper of regularization pins the free constant offset
+        cp.Problem(cp.Minimize(cp.sum_squares(kappa) + 1e-9 * cp.sum_squares(n))).solve()
+        return n.value
+
+    _wrong(ch03.check_min_curvature_qp(unbounded), "beyond the", "Bound every offset")
+
+
+def test_curvature_qp_by_the_library_is_refused():
+    from racing_lib.planning import solve_curvature
+
+    def library(oval, margin):
+        return solve_curvature(oval, None).e_y
+
+    _wrong(ch03.check_min_curvature_qp(library), "solve_curvature", "cvxpy")
+
+
+def test_min_time_nlp_with_only_the_lateral_limit():
+    import casadi as ca
+
+    def lateral_only(oval, grip, v_top):
+        n = oval.s.size
+        opti = ca.Opti()
+        v, a = opti.variable(n), opti.variable(n)
+        v_next = ca.vertcat(v[1:], v[0])
+        opti.minimize(ca.sum1(2 * oval.ds / (v + v_next)))
+        opti.subject_to(v_next**2 == v**2 + 2 * a * oval.ds)
+        opti.subject_to((v**2 * oval.kappa / grip) ** 2 <= 1)  # cornering only: brakes unlimited
+        opti.subject_to(opti.bounded(1.0, v, v_top))
+        opti.set_initial(v, 10.0)
+        opti.solver("ipopt", {"print_time": False}, {"print_level": 0, "sb": "yes"})
+        return opti.solve().value(v)
+
+    _wrong(ch04.check_min_time_nlp(lateral_only), "times its grip", "a_x =", "circle")
+
+
+def test_min_time_nlp_answered_by_a_slow_but_feasible_profile():
+    def cautious(oval, grip, v_top):
+        return np.full(oval.s.size, 0.95 * math.sqrt(grip * 60.0))  # the bend's speed, everywhere
+
+    _wrong(ch04.check_min_time_nlp(cautious), "slower", "fastest")
+
+
+def _lateral_mpc(problem, *, from_zero=False, weigh_x0=False):
+    import cvxpy as cp
+
+    n = problem.d.shape[0]
+    x, u = cp.Variable((n + 1, 2)), cp.Variable(n)
+    prev = 0.0 if from_zero else problem.delta_prev
+    steps = cp.hstack([u[:1] - prev, u[1:] - u[:-1]])
+    weighed = x[:-1] if weigh_x0 else x[1:]
+    cost = cp.sum(cp.square(weighed) @ problem.q) + problem.r * cp.sum_squares(steps)
+    model = [x[0] == problem.x0]
+    model += [x[k + 1] == problem.A @ x[k] + problem.B * u[k] + problem.d[k] for k in range(n)]
+    cp.Problem(cp.Minimize(cost), [*model, cp.abs(u) <= problem.delta_max]).solve()
+    return u.value
+
+
+def test_tracking_qp_whose_first_step_starts_from_zero():
+    result = ch05.check_lateral_mpc(lambda p: _lateral_mpc(p, from_zero=True))
+    _wrong(result, "last command -0.05 rad", "delta_prev", "first command")
+
+
+def test_tracking_qp_that_weighs_the_measured_state():
+    _wrong(ch05.check_lateral_mpc(lambda p: _lateral_mpc(p, weigh_x0=True)), "x_1..x_N")
+
+
+def test_cma_es_without_the_covariance_update():
+    """An isotropic (mu/mu_w, lambda)-ES with cumulative step-size adaptation: it stalls."""
+
+    def isotropic(f, x0, sigma0, budget, seed):
+        rng = np.random.default_rng(seed)
+        n = len(x0)
+        lam = 4 + int(3 * math.log(n))
+        mu = lam // 2
+        w = math.log(mu + 0.5) - np.log(np.arange(1, mu + 1))
+        w /= w.sum()
+        mu_eff = 1 / np.sum(w**2)
+        c_s = (mu_eff + 2) / (n + mu_eff + 5)
+        chi_n = math.sqrt(n) * (1 - 1 / (4 * n) + 1 / (21 * n * n))
+        m, sigma, p_s = np.array(x0, float), sigma0, np.zeros(n)
+        best, used = (f(m), m), 1
+        while used + lam <= budget:
+            z = rng.standard_normal((lam, n))
+            x = m + sigma * z
+            costs = np.array([f(xi) for xi in x])
+            used += lam
+            order = np.argsort(costs)
+            if costs[order[0]] < best[0]:
+                best = (costs[order[0]], x[order[0]])
+            z_w = w @ z[order[:mu]]
+            m = m + sigma * z_w
+            p_s = (1 - c_s) * p_s + math.sqrt(c_s * (2 - c_s) * mu_eff) * z_w
+            sigma *= math.exp(c_s / (1 + c_s) * (np.linalg.norm(p_s) / chi_n - 1))
+        return best[1]
+
+    _wrong(ch06.check_cma_es(isotropic), "3 of 3 cases are wrong", "learning its shape")
+
+
+def test_cma_es_that_overspends_its_budget():
+    cma_es = _solutions("06_tuning")["cma_es"]
+
+    def greedy(f, x0, sigma0, budget, seed):
+        return cma_es(f, x0, sigma0, 2 * budget, seed)
+
+    _wrong(ch06.check_cma_es(greedy), "the budget is")
+
+
+def test_cma_es_by_pycma_is_refused():
+    import cma
+
+    def borrowed(f, x0, sigma0, budget, seed):
+        return cma.fmin2(f, x0, sigma0, {"seed": seed + 1, "verbose": -9, "maxfevals": budget})[0]
+
+    _wrong(ch06.check_cma_es(borrowed), "fmin2", "yourself")

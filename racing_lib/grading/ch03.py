@@ -6,12 +6,15 @@ with :mod:`racing_lib.planning` on the same cases.
 * 3.1 :func:`check_cornering_speed`: the friction limit on speed in a corner (paper Eq. MaxV).
 * 3.2 :func:`check_lap_time`: the time to drive a speed profile.
 * 3.3 :func:`check_steady_cornering`: the linearization point of each QP iteration.
+* 3.4 :func:`check_min_curvature_qp`: the minimum-curvature line of an oval, a QP the reader
+  writes in cvxpy (:func:`oval_track` gives the oval).
 """
 
 from __future__ import annotations
 
 import functools
 import math
+from typing import NamedTuple
 
 import numpy as np
 
@@ -23,10 +26,20 @@ from racing_lib.grading.grader import (
     as_tuple,
     call,
     differs,
+    every_case,
     grade,
+    refuse_library,
 )
 
-__all__ = ["check_cornering_speed", "check_lap_time", "check_steady_cornering"]
+__all__ = [
+    "OvalTrack",
+    "check_cornering_speed",
+    "check_lap_time",
+    "check_min_curvature_qp",
+    "check_steady_cornering",
+    "line_curvature",
+    "oval_track",
+]
 
 _DEG = 180.0 / math.pi
 _SPACING = 5.0  # [m] node spacing of the exercise grid
@@ -170,3 +183,134 @@ def check_steady_cornering(steady_state) -> CheckResult:
         return "v_y, r and delta of steady cornering agree with the library, left and right."
 
     return grade("3.3 Steady cornering", body, weight=2.0)
+
+
+class OvalTrack(NamedTuple):
+    """An oval (two straights joined by two half circles) sampled for exercises 3.4 and 4.3.
+
+    Attributes
+    ----------
+    s : ndarray (N,)
+        Arc length of the nodes, m (uniform spacing ``ds``; the last node is ``ds`` before the
+        first, round the loop).
+    kappa : ndarray (N,)
+        Curvature of the centerline at the nodes, 1/m (0 on the straights, 1/radius in the
+        bends, counter-clockwise).
+    ds : float
+        Node spacing, m.
+    length : float
+        Lap length, m.
+    half_width : float
+        Distance from the centerline to either edge, m.
+    """
+
+    s: np.ndarray
+    kappa: np.ndarray
+    ds: float
+    length: float
+    half_width: float
+
+
+def oval_track(
+    straight: float = 200.0, radius: float = 60.0, half_width: float = 4.0, ds: float = 2.0
+) -> OvalTrack:
+    """The exercise oval: straights of ``straight`` m, bends of ``radius`` m, nodes ``ds`` apart."""
+    length = 2.0 * straight + 2.0 * math.pi * radius
+    n = int(round(length / ds))
+    ds = length / n
+    s = ds * np.arange(n)
+    along_half = s % (straight + math.pi * radius)
+    kappa = np.where(along_half < straight, 0.0, 1.0 / radius)
+    return OvalTrack(s, kappa, float(ds), float(length), float(half_width))
+
+
+def line_curvature(oval: OvalTrack, n: np.ndarray) -> np.ndarray:
+    """Curvature (1/m) of the line ``n`` (m, left of the centerline), linearized for small n.
+
+    ``kappa_c + (n_{k+1} - 2 n_k + n_{k-1}) / ds^2``, with the indices wrapping round the loop.
+    """
+    return oval.kappa + (np.roll(n, -1) - 2.0 * n + np.roll(n, 1)) / oval.ds**2
+
+
+def _curvature_cost(oval: OvalTrack, n: np.ndarray) -> float:
+    """The QP's objective: the integral of the squared line curvature, 1/m."""
+    return float(np.sum(line_curvature(oval, n) ** 2) * oval.ds)
+
+
+@functools.lru_cache(maxsize=4)
+def _min_curvature_reference(margin: float) -> tuple[np.ndarray, float]:
+    """The optimum of exercise 3.4 by another method: bounded least squares (SciPy's BVLS)."""
+    from scipy.optimize import lsq_linear
+
+    oval = oval_track()
+    n = oval.s.size
+    eye = np.eye(n)
+    d2 = (np.roll(eye, -1, axis=1) - 2.0 * eye + np.roll(eye, 1, axis=1)) / oval.ds**2
+    bound = oval.half_width - margin
+    scale = math.sqrt(oval.ds)
+    res = lsq_linear(d2 * scale, -oval.kappa * scale, bounds=(-bound, bound), method="bvls")
+    return res.x, _curvature_cost(oval, res.x)
+
+
+def check_min_curvature_qp(min_curvature_line) -> CheckResult:
+    """Exercise 3.4: ``min_curvature_line(oval, margin) -> n`` (m), the minimum-curvature line.
+
+    The line's lateral offsets n (N,) minimize the integral of the squared curvature
+    (:func:`line_curvature`) subject to ``|n_k| <= half_width - margin``. Checked for two margins:
+    the line stays on the track, and its cost is the optimum to 1e-4 (relative), found by a
+    different method (bounded least squares). Calling the library's curvature QP is refused.
+    """
+
+    def check_case(margin: float) -> None:
+        oval = oval_track()
+        n_ref, cost_ref = _min_curvature_reference(margin)
+        got = as_array(call(min_curvature_line, oval, margin), n_ref.shape, "min_curvature_line")
+        bound = oval.half_width - margin
+        over = np.abs(got) - bound
+        if np.max(over) > 1e-4:
+            k = int(np.argmax(over))
+            side = "left" if got[k] > 0 else "right"
+            raise Wrong(
+                f"with a margin of {margin:.1f} m your line passes {abs(got[k]):.2f} m {side} of "
+                f"the centerline at s = {oval.s[k]:.0f} m, {over[k]:.2f} m beyond the "
+                f"{bound:.1f} m it may use.",
+                1.0,
+                "Bound every offset: -(half_width - margin) <= n_k <= half_width - margin.",
+            )
+        cost = _curvature_cost(oval, got)
+        if cost > cost_ref * (1.0 + 1e-4) + 1e-9:
+            k = int(np.argmax(np.abs(got - n_ref)))
+            msg = (
+                f"with a margin of {margin:.1f} m your line's squared curvature integrates to "
+                f"{cost:.5f} 1/m, the best line's to {cost_ref:.5f} 1/m ({cost / cost_ref:.2f} "
+                f"times); the lines differ most at s = {oval.s[k]:.0f} m (yours n = "
+                f"{got[k]:+.2f} m, the best n = {n_ref[k]:+.2f} m)."
+            )
+            if min(oval.s[k], oval.length - oval.s[k]) < 10.0:
+                raise Wrong(
+                    msg,
+                    2.0,
+                    "That is where the loop closes: the second difference of n_0 uses n_{N-1} and "
+                    "that of n_{N-1} uses n_0.",
+                )
+            if np.max(np.abs(got)) < 1e-6:
+                raise Wrong(msg, 2.0, "Your line is the centerline: include kappa_c in the cost.")
+            raise Wrong(msg, 0.0, "Minimize the sum of squares of the line curvature, times ds.")
+
+    def body() -> str:
+        from racing_lib.planning import solve_curvature
+
+        refuse_library(
+            min_curvature_line,
+            {"solve_curvature": solve_curvature},
+            "write the QP in cvxpy: a variable per node, the curvature cost, the bounds.",
+        )
+        every_case((0.5, 1.5), check_case)
+        oval = oval_track()
+        n_ref, _ = _min_curvature_reference(0.5)
+        return (
+            f"your QP finds the minimum-curvature line for both margins: on the {oval.s.size}-node "
+            f"oval it swings from {n_ref.min():+.1f} m to {n_ref.max():+.1f} m, apex inside."
+        )
+
+    return grade("3.4 The minimum-curvature QP", body, weight=3.0)

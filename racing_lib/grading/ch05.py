@@ -7,12 +7,14 @@ Exercise notebook: ``exercises/05_mpc.ipynb``. Every check compares the reader's
   ``xi_hat_k = xi_ref_k + lambda_k (xi_0 - xi_ref_0)``.
 * 5.2 :func:`check_steering_lag`: the discrete first-order steering actuator in the QP.
 * 5.3 :func:`check_pedal_inversion`: the pedal that produces the planned a_x (Appendix C).
+* 5.4 :func:`check_lateral_mpc`: a tracking MPC's QP (cost, dynamics, bounds) for the lateral
+  error of a car, which the reader writes and solves (:func:`lateral_mpc_problem`).
 """
 
 from __future__ import annotations
 
 import functools
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -29,7 +31,14 @@ from racing_lib.grading.grader import (
     refuse_library,
 )
 
-__all__ = ["check_heuristic_trajectory", "check_pedal_inversion", "check_steering_lag"]
+__all__ = [
+    "LateralMPCProblem",
+    "check_heuristic_trajectory",
+    "check_lateral_mpc",
+    "check_pedal_inversion",
+    "check_steering_lag",
+    "lateral_mpc_problem",
+]
 
 _NAMES = ("v_x", "v_y", "r", "e_psi", "e_y", "s")
 _UNITS = ("m/s", "m/s", "rad/s", "rad", "m", "m")
@@ -218,3 +227,182 @@ def check_pedal_inversion(pedal_for) -> CheckResult:
         )
 
     return grade("5.3 Pedal from acceleration", body, weight=1.0)
+
+
+class LateralMPCProblem(NamedTuple):
+    """One period's QP of a lateral tracking MPC (exercise 5.4).
+
+    A car at speed ``v`` follows its line with errors x = (e_y, e_psi) (m, rad) and steers with
+    delta (rad). Over one period ``dt`` the kinematic model gives ``x_{k+1} = A x_k + B delta_k
+    + d_k``, where d_k is what the line's curvature kappa_k does to the errors.
+
+    Attributes
+    ----------
+    A : ndarray (2, 2); B : ndarray (2,); d : ndarray (N, 2)
+        The discrete model, stages k = 0..N-1.
+    x0 : ndarray (2,)
+        The measured errors now, (m, rad).
+    q : ndarray (2,)
+        Weights of e_y^2 (1/m^2) and e_psi^2 (1/rad^2) at stages 1..N.
+    r : float
+        Weight of the steering steps (delta_k - delta_{k-1})^2, 1/rad^2.
+    delta_prev : float
+        The command applied in the last period, rad (delta_{-1}).
+    delta_max : float
+        Steering bound, rad.
+    """
+
+    A: np.ndarray
+    B: np.ndarray
+    d: np.ndarray
+    x0: np.ndarray
+    q: np.ndarray
+    r: float
+    delta_prev: float
+    delta_max: float
+
+
+def lateral_mpc_problem(
+    x0: tuple[float, float],
+    delta_prev: float,
+    kappa: np.ndarray,
+    v: float = 20.0,
+    dt: float = 0.1,
+    wheelbase: float = 2.7,
+    delta_max: float = 0.08,
+) -> LateralMPCProblem:
+    """The QP data of a kinematic car at ``v`` (m/s) on a line of curvatures ``kappa`` (1/m)."""
+    A = np.array([[1.0, v * dt], [0.0, 1.0]])
+    B = np.array([v * v * dt * dt / (2.0 * wheelbase), v * dt / wheelbase])
+    kappa = np.asarray(kappa, dtype=float)
+    d = np.column_stack([-0.5 * v * v * dt * dt * kappa, -v * dt * kappa])
+    q = np.array([1.0, 10.0])
+    return LateralMPCProblem(A, B, d, np.array(x0, float), q, 50.0, float(delta_prev), delta_max)
+
+
+def _lateral_cost(problem: LateralMPCProblem, delta: np.ndarray) -> float:
+    """The MPC's cost of the steering sequence ``delta`` (N,), by simulating the model."""
+    x = problem.x0.copy()
+    cost, previous = 0.0, problem.delta_prev
+    for k, u in enumerate(delta):
+        x = problem.A @ x + problem.B * u + problem.d[k]
+        cost += float(problem.q @ (x * x)) + problem.r * (u - previous) ** 2
+        previous = u
+    return cost
+
+
+def _condensed_optimum(problem: LateralMPCProblem, first_state_weighed: int = 1) -> np.ndarray:
+    """The optimal commands, by the condensed QP as bounded least squares (SciPy's BVLS).
+
+    Another method than the reader's sparse QP. ``first_state_weighed`` 0 weighs x_0..x_{N-1}
+    instead of x_1..x_N (a mistake, for hints).
+    """
+    from scipy.optimize import lsq_linear
+
+    n = problem.d.shape[0]
+    # x_k = A^k x0 + sum_{j<k} A^{k-1-j} (B delta_j + d_j): affine in the commands.
+    gamma = np.zeros((2 * (n + 1), n))
+    offset = np.zeros(2 * (n + 1))
+    offset[:2] = problem.x0
+    for k in range(1, n + 1):
+        offset[2 * k : 2 * k + 2] = problem.A @ offset[2 * k - 2 : 2 * k] + problem.d[k - 1]
+        gamma[2 * k : 2 * k + 2] = problem.A @ gamma[2 * k - 2 : 2 * k]
+        gamma[2 * k : 2 * k + 2, k - 1] = problem.B
+    keep = slice(2 * first_state_weighed, 2 * (first_state_weighed + n))
+    weights = np.sqrt(np.tile(problem.q, n))
+    steps = np.eye(n) - np.eye(n, k=-1)
+    first = np.zeros(n)
+    first[0] = problem.delta_prev
+    rows = np.vstack([weights[:, None] * gamma[keep], np.sqrt(problem.r) * steps])
+    target = np.concatenate([-weights * offset[keep], np.sqrt(problem.r) * first])
+    bound = problem.delta_max
+    return lsq_linear(rows, target, bounds=(-bound, bound), method="bvls", tol=1e-12).x
+
+
+@functools.lru_cache(maxsize=8)
+def _lateral_reference(case: int) -> tuple[LateralMPCProblem, np.ndarray]:
+    """Case ``case`` of exercise 5.4 and its optimal commands."""
+    problem = _LATERAL_CASES[case]()
+    return problem, _condensed_optimum(problem)
+
+
+_LATERAL_CASES = {
+    # 1 m left of the line, heading a little out, a left bend ahead; last command straight.
+    0: lambda: lateral_mpc_problem((1.0, 0.02), 0.0, np.r_[np.zeros(8), np.full(17, 1 / 80)]),
+    # On the line but steering hard right from the last period, a right bend: bound active.
+    1: lambda: lateral_mpc_problem((0.0, -0.01), -0.05, np.r_[np.full(10, -1 / 40), np.zeros(15)]),
+    # Settled on a straight, a tight bend entered in the horizon's last period: only the last
+    # predicted state x_N sees it.
+    2: lambda: lateral_mpc_problem((0.2, 0.0), 0.0, np.r_[np.zeros(24), 1 / 30]),
+}
+
+
+def check_lateral_mpc(mpc_steering) -> CheckResult:
+    """Exercise 5.4: ``mpc_steering(problem) -> delta`` (N,), rad: the MPC's optimal commands.
+
+    ``problem`` is a :class:`LateralMPCProblem`. Checked on two situations: the commands respect
+    the bound, and their cost (found by simulating the model) is the optimum to 1e-4 (relative),
+    which the check finds by another method (the condensed QP as bounded least squares).
+    """
+
+    def check_case(case: int) -> None:
+        problem, best = _lateral_reference(case)
+        n = problem.d.shape[0]
+        what = (
+            f"starting {problem.x0[0]:+.1f} m off the line, last command "
+            f"{problem.delta_prev:+.2f} rad"
+        )
+        got = as_array(call(mpc_steering, problem), (n,), "mpc_steering")
+        if np.max(np.abs(got)) > problem.delta_max + 2e-4:  # a first-order solver's tolerance
+            k = int(np.argmax(np.abs(got)))
+            raise Wrong(
+                f"{what}, your MPC steers {got[k]:+.3f} rad at stage {k}, beyond the bound "
+                f"{problem.delta_max} rad.",
+                2.0,
+                "Bound every command: -delta_max <= delta_k <= delta_max.",
+            )
+        cost, optimum = _lateral_cost(problem, got), _lateral_cost(problem, best)
+        if cost <= optimum * (1.0 + 1e-4) + 1e-9:
+            return
+        msg = (
+            f"{what}, your commands cost {cost:.5f}, the best {optimum:.5f}; the first command, "
+            f"the one the car gets, is {got[0]:+.4f} rad against {best[0]:+.4f} rad."
+        )
+        from_zero = _condensed_optimum(problem._replace(delta_prev=0.0))
+        shifted = _condensed_optimum(problem, first_state_weighed=0)
+        if problem.delta_prev != 0.0 and np.max(np.abs(got - from_zero)) < 1e-3:
+            raise Wrong(
+                msg,
+                2.0,
+                "Your first steering step is measured from 0: the rate term of stage 0 is "
+                "r (delta_0 - delta_prev)^2, from the command the car has now.",
+            )
+        if np.max(np.abs(got - shifted)) < 1e-3:
+            raise Wrong(
+                msg,
+                2.0,
+                "Your cost weighs x_0..x_{N-1}: x_0 is measured and no command changes it; "
+                "weigh the predicted x_1..x_N.",
+            )
+        raise Wrong(
+            msg,
+            0.0,
+            "Check the model constraints: x_{k+1} = A x_k + B delta_k + d_k, starting from x0.",
+        )
+
+    def body() -> str:
+        from racing_lib.control.mpc import CoupledMPC, TrackingQP
+
+        refuse_library(
+            mpc_steering,
+            {"TrackingQP": TrackingQP, "CoupledMPC": CoupledMPC},
+            "write the QP in cvxpy (or OSQP): the commands as variables, the cost, the model as "
+            "constraints, the bounds.",
+        )
+        every_case(sorted(_LATERAL_CASES), check_case)
+        return (
+            "your MPC's QP gives the optimal steering in all three situations, bound included; "
+            "its first command is what the car would get."
+        )
+
+    return grade("5.4 The tracking QP", body, weight=3.0)

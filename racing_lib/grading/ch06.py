@@ -5,22 +5,36 @@ Exercise notebook: ``exercises/06_tuning.ipynb``. Every check compares the reade
 
 * 6.1 :func:`check_tuning_objective`: the score of one completed closed-loop lap (paper Eq. CMA).
 * 6.2 :func:`check_search_space`: from a CMA-ES point in log10 space to the MPC weights.
+* 6.3 :func:`check_cma_es`: a CMA-ES loop of the reader's own, on an ill-conditioned, rotated
+  ellipsoid that a search without covariance adaptation cannot solve on the same budget.
 """
 
 from __future__ import annotations
+
+from collections.abc import Callable
 
 import numpy as np
 
 from racing_lib.grading.grader import (
     CheckResult,
     Wrong,
+    as_array,
     as_float,
     call,
     differs,
+    every_case,
     grade,
+    refuse_library,
 )
 
-__all__ = ["check_search_space", "check_tuning_objective", "synthetic_lap"]
+__all__ = [
+    "CMA_BUDGET",
+    "check_cma_es",
+    "check_search_space",
+    "check_tuning_objective",
+    "rotated_ellipsoid",
+    "synthetic_lap",
+]
 
 _LENGTH = 4392.9  # [m] track length of the synthetic laps (about the expressway's)
 
@@ -176,3 +190,94 @@ def check_search_space(to_params) -> CheckResult:
         return "your map from log10 space to weights agrees with SearchSpace.to_params."
 
     return grade("6.2 Search space", body, weight=1.0)
+
+
+#: Evaluations the reader's CMA-ES may spend per run in exercise 6.3.
+CMA_BUDGET = 3000
+#: Cost a run must reach: the optimum is 0.
+_CMA_TARGET = 1e-8
+
+
+def rotated_ellipsoid(dim: int = 6, condition: float = 1e4, seed: int = 42) -> Callable:
+    """f(x) = sum_i condition^(i/(dim-1)) y_i^2, y = Q (x - 3): a valley along a tilted axis.
+
+    The axes' lengths differ by sqrt(condition) (100 times at the default) and are rotated by a
+    random orthogonal Q, so no coordinate-wise or isotropic search suits it; the minimum is 0 at
+    x = (3, ..., 3). Its evaluations are counted in ``f.calls``.
+    """
+    rng = np.random.default_rng(seed)
+    q, _ = np.linalg.qr(rng.standard_normal((dim, dim)))
+    scales = condition ** (np.arange(dim) / (dim - 1))
+    optimum = np.full(dim, 3.0)
+
+    def f(x) -> float:
+        f.calls += 1
+        y = q @ (np.asarray(x, dtype=float) - optimum)
+        return float(np.sum(scales * y * y))
+
+    f.calls = 0
+    return f
+
+
+def check_cma_es(cma_es) -> CheckResult:
+    """Exercise 6.3: ``cma_es(f, x0, sigma0, budget, seed) -> x_best``, a CMA-ES loop.
+
+    Three runs (seeds 0, 1, 2) from x0 = 0 with sigma0 = 1 on :func:`rotated_ellipsoid` must each
+    reach f < 1e-8 within :data:`CMA_BUDGET` evaluations. A (mu/mu_w, lambda) search with step-size
+    adaptation but without the covariance update ends at f = 10-200 on that budget. pycma and the
+    library's tuner are refused.
+    """
+
+    def check_case(seed: int) -> None:
+        f = rotated_ellipsoid()
+        x0 = np.zeros(6)
+        x_best = as_array(call(cma_es, f, x0.copy(), 1.0, CMA_BUDGET, seed), (6,), "cma_es")
+        used = f.calls
+        f_best = f(x_best)
+        if used > CMA_BUDGET + 1:
+            raise Wrong(
+                f"with seed {seed} your search evaluated f {used} times; the budget is "
+                f"{CMA_BUDGET}.",
+                1.0,
+                "Stop before a generation would exceed the budget.",
+            )
+        if f_best < _CMA_TARGET:
+            return
+        hint = (
+            "Check the covariance update: C' = (1 - c_1 - c_mu) C + c_1 p_c p_c^T + c_mu "
+            "sum_i w_i y_i y_i^T, with the steps y_i = (x_i - m) / sigma of the mu best."
+        )
+        if f_best > 1.0:
+            hint = (
+                "A valley this narrow and tilted is only solved by learning its shape: sample "
+                "m + sigma B D z with C = B D^2 B^T, and update C from the selected steps."
+            )
+        raise Wrong(
+            f"with seed {seed} your best point has f = {f_best:.3g} after {used} evaluations "
+            f"(it should reach {_CMA_TARGET:g}; the minimum is 0 at x = (3, ..., 3)).",
+            1.0 if f_best > 1.0 else 0.0,
+            hint,
+        )
+
+    def body() -> str:
+        from racing_lib.optim import cmaes as library_cmaes
+
+        refuse_library(
+            cma_es,
+            {
+                "cma": None,
+                "CMAEvolutionStrategy": None,
+                "fmin": None,
+                "fmin2": None,
+                "CmaTuner": library_cmaes.CmaTuner,
+                "tune": library_cmaes.tune,
+            },  # fmt: skip
+            "write the sampling, selection and the updates of m, p_sigma, sigma, p_c and C.",
+        )
+        every_case((0, 1, 2), check_case)
+        return (
+            f"your CMA-ES reaches f < {_CMA_TARGET:g} on the rotated ellipsoid (axes 100 times "
+            f"apart) with all three seeds, within {CMA_BUDGET} evaluations each."
+        )
+
+    return grade("6.3 A CMA-ES loop", body, weight=3.0)

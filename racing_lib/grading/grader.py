@@ -348,8 +348,8 @@ def refuse_library(fn: Callable[..., Any], forbidden: Mapping[str, Any], task: s
         for label, target in forbidden.items():
             if (name == label and library_name) or (target is not None and obj is target):
                 raise Wrong(
-                    f"your function calls the library's {label}, which is what this exercise "
-                    f"asks you to write: {task}"
+                    f"your function calls {label}, which does what this exercise asks you to "
+                    f"write yourself: {task}"
                 )
 
 
