@@ -188,6 +188,20 @@ def test_prediction_without_drag_misses_by_the_drag_deceleration(model_drive):
     np.testing.assert_allclose(res.errors["v_x"][:, 0], expected, rtol=0.05)
 
 
+def test_rms_over_some_windows(model_drive):
+    log, track = model_drive
+    res = prediction_errors(log, track, P, ModelOptions(drag=False), horizons=(0.1,))
+    v = np.asarray(log.vx)[res.starts]
+    fast = v > np.median(v)
+    # Drag grows with v^2: the fast windows miss by more than the slow ones, and the two RMS
+    # combine into the overall one.
+    hi, lo = res.rms_over("v_x", 0.1, fast), res.rms_over("v_x", 0.1, ~fast)
+    assert hi > lo > 0.0
+    n_hi, n_lo = fast.sum(), (~fast).sum()
+    assert res.at("v_x", 0.1) == pytest.approx(np.sqrt((n_hi * hi**2 + n_lo * lo**2) / v.size))
+    assert np.isnan(res.rms_over("v_x", 0.1, np.zeros(v.size, dtype=bool)))
+
+
 def test_prediction_table_and_format(model_drive):
     log, track = model_drive
     rows = prediction_table(log, track, P, horizons=(0.5, 1.0), stride=5)

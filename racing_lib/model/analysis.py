@@ -434,6 +434,16 @@ class PredictionError:
         """RMS error of ``measure`` at ``horizon`` (s), in the measure's unit."""
         return float(self.rms[measure][self._column(measure, horizon)])
 
+    def rms_over(self, measure: str, horizon: float, windows: np.ndarray) -> float:
+        """RMS error of ``measure`` at ``horizon`` (s) over some windows only (a boolean mask).
+
+        ``windows`` has one entry per window (:attr:`starts`), e.g. ``log.pedal[starts] < 0`` for
+        the windows that start under braking. NaN when it selects none.
+        """
+        col = self.errors[measure][:, self._column(measure, horizon)]
+        chosen = col[np.asarray(windows, dtype=bool)]
+        return float(np.sqrt(np.mean(chosen**2))) if chosen.size else float("nan")
+
     def percentile(self, measure: str, horizon: float, q: float) -> float:
         """The ``q``-th percentile (0-100) of the absolute error of ``measure`` at ``horizon``."""
         return float(np.percentile(self.errors[measure][:, self._column(measure, horizon)], q))
