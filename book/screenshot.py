@@ -30,8 +30,8 @@ from pathlib import Path
 BOOK = Path(__file__).resolve().parent
 HTML = BOOK / "_build" / "html"
 OUT = BOOK / "_build" / "screenshots"
-#: The front page, the exercises page and every chapter (notebooks/*.html, found at run time).
-FIXED_PAGES = ("book/intro.html", "book/exercises.html")
+#: The front page, the notation and exercises pages, and every chapter (notebooks/*.html).
+FIXED_PAGES = ("book/intro.html", "book/notation.html", "book/exercises.html")
 WINDOW = (1280, 1600)  # [px] width, default height
 #: A math element of the built page (display or inline), and one MathJax typeset.
 _MATH_ELEMENT = re.compile(r'<(?:div|span) class="math(?: [^"]*)?"')

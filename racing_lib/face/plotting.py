@@ -169,17 +169,27 @@ def plot_corners(
         for extra in axes[n:]:
             extra.set_visible(False)
     fig = axes[0].figure
-    for ax, (number, s_c) in zip(axes, corners.items(), strict=False):
+    for k, (ax, (number, s_c)) in enumerate(zip(axes, corners.items(), strict=False)):
         plot_track(track, lines, ax=ax, start_line=False)
         xc, yc = track.centerline.position(s_c)
         ax.set_xlim(float(xc) - half_width, float(xc) + half_width)
         ax.set_ylim(float(yc) - half_width, float(yc) + half_width)
         ax.set_title(f"corner {number}")
-        ax.set_xlabel("")
-        ax.set_ylabel("")
         if ax.get_legend() is not None:
             ax.get_legend().remove()
-    fig.tight_layout()
+        # Metres on every panel, named once per row and column of the grid.
+        grid_spec = ax.get_subplotspec()
+        first_col = grid_spec is None or grid_spec.is_first_col()
+        last_row = grid_spec is None or grid_spec.is_last_row() or k + 3 >= n
+        ax.set_ylabel("y [m]" if first_col else "")
+        ax.set_xlabel("x [m]" if last_row else "")
+    if lines:
+        # One legend for the grid, below it: which line is which in every panel.
+        handles, labels = axes[0].get_legend_handles_labels()
+        fig.legend(handles, labels, loc="lower center", ncol=len(labels), fontsize=8)
+        fig.tight_layout(rect=(0.0, 0.06, 1.0, 1.0))
+    else:
+        fig.tight_layout()
     return fig, axes
 
 
@@ -260,9 +270,114 @@ def plot_row_speeds(
             "closed loop": row_profile(row, "closed_loop", "vx_mps"),
         },
         ax=ax,
-        ylabel="v_x [m/s]",
+        ylabel=r"$v_x$ [m/s]",
         corners=corners,
     )
     ax.set_title(title, fontsize=10, pad=14)
     ax.set_xlabel("")
     return ax
+
+
+def plot_lap_times(
+    rows: Sequence[Mapping[str, Any]], ax: Axes | None = None, best: float | None = None
+) -> Axes:
+    """The closed-loop lap times of ablation rows, trial by trial, against each row's plan.
+
+    Our stand-in for the paper's Fig. 5 (the distribution of human lap times with the plan's and
+    the closed loop's best marked): one line per row, a dot per seeded trial, a bar at the planned
+    lap, and optionally a vertical line at the best possible lap.
+
+    Parameters
+    ----------
+    rows : sequence of dict
+        Rows of the ablation table (``name``, ``planned_lap_time_s``, ``trial_metrics``).
+    ax : Axes, optional
+        Where to draw; a new figure when omitted.
+    best : float, optional
+        Lap time of the best possible lap, s, drawn as a vertical line.
+    """
+    if ax is None:
+        _, ax = plt.subplots(figsize=(8.0, 0.45 * len(rows) + 1.2))
+    for i, row in enumerate(rows):
+        times = [t["lap_time_s"] for t in row["trial_metrics"] if t.get("completed")]
+        jitter = 0.12 * np.sin(np.arange(len(times)) * 2.4)  # spread the dots, deterministically
+        walls = [t.get("wall_contacts", 0) for t in row["trial_metrics"] if t.get("completed")]
+        colors = [COLORS["closed loop"] if w == 0 else "crimson" for w in walls]
+        ax.scatter(times, i + jitter, s=14, c=colors, zorder=3)
+        ax.plot([row["planned_lap_time_s"]] * 2, [i - 0.3, i + 0.3], color=COLORS["plan"], lw=2.0)
+    if best is not None:
+        ax.axvline(best, color=COLORS["best lap"], lw=1.2, ls="--")
+    ax.set_yticks(range(len(rows)), [row["name"] for row in rows], fontsize=8)
+    ax.invert_yaxis()
+    ax.set_xlabel("lap time [s]")
+    handles = [
+        plt.Line2D([], [], color=COLORS["plan"], lw=2.0, label="planned lap"),
+        plt.Line2D([], [], color=COLORS["closed loop"], marker="o", ls="", label="trial, clean"),
+        plt.Line2D([], [], color="crimson", marker="o", ls="", label="trial, wall contact"),
+    ]
+    if best is not None:
+        handles.append(plt.Line2D([], [], color=COLORS["best lap"], ls="--", label="best lap"))
+    ax.legend(handles=handles, fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0))
+    return ax
+
+
+def lap_animation(
+    track: Track,
+    log: Any,
+    *,
+    frames: int = 60,
+    trail: float = 8.0,
+    plan: Any = None,
+    size: tuple[float, float] = (5.5, 4.0),
+) -> Any:
+    """A short animation of a logged lap on its track: the car, its recent path, its speed.
+
+    Kept small for a notebook and the book: ``frames`` frames spread evenly over the lap, a
+    figure of ``size`` inches at 72 dpi. Show it with ``IPython.display.HTML(anim.to_jshtml())``.
+
+    Parameters
+    ----------
+    track : Track
+        The track the lap was driven on.
+    log : LapLog
+        The lap (``t``, ``x``, ``y``, ``vx``, ``in_lap``).
+    frames : int
+        Number of frames.
+    trail : float
+        Length of the trail drawn behind the car, s.
+    plan : line, optional
+        The planned line, drawn thin beneath.
+    size : (float, float)
+        Figure size, inches.
+
+    Returns
+    -------
+    matplotlib.animation.FuncAnimation
+    """
+    from matplotlib.animation import FuncAnimation
+
+    t, x, y, vx = (np.asarray(getattr(log, k), dtype=float) for k in ("t", "x", "y", "vx"))
+    lap = np.flatnonzero(np.asarray(log.in_lap))
+    first, last = (int(lap[0]), int(lap[-1])) if lap.size else (0, t.size - 1)
+    picks = np.linspace(first, last, frames).round().astype(int)
+    steps_back = int(round(trail / max(float(np.median(np.diff(t))), 1e-9)))
+    fig, ax = plt.subplots(figsize=size, dpi=72)
+    plot_track(track, {"plan": plan} if plan is not None else None, ax=ax, start_line=True)
+    ax.get_legend().remove()
+    (path,) = ax.plot([], [], color=COLORS["closed loop"], lw=2.0)
+    (car,) = ax.plot([], [], "o", color="crimson", ms=6)
+    label = ax.text(0.02, 0.97, "", transform=ax.transAxes, va="top", fontsize=9,
+                    bbox={"fc": "white", "ec": "0.7"})  # fmt: skip
+    fig.tight_layout()
+
+    def draw(k: int) -> tuple[Any, ...]:
+        i = picks[k]
+        j = max(first, i - steps_back)
+        path.set_data(x[j : i + 1], y[j : i + 1])
+        car.set_data([x[i]], [y[i]])
+        label.set_text(f"t = {t[i] - t[first]:5.1f} s   v = {3.6 * vx[i]:4.0f} km/h")
+        return path, car, label
+
+    anim = FuncAnimation(fig, draw, frames=frames, interval=120, blit=True)
+    plt.close(fig)  # shown through the animation's HTML, not as a still
+    return anim

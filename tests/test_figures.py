@@ -1,0 +1,95 @@
+"""The course's figures: the diagrams draw what they name, the lap animation and the lap-time
+distribution show the lap they are given, the corner zooms are labelled."""
+
+from __future__ import annotations
+
+import matplotlib
+
+matplotlib.use("Agg")
+
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+
+from racing_lib.face import plotting, schematics  # noqa: E402
+from racing_lib.tracks import corner_positions, load_track  # noqa: E402
+
+
+def _texts(ax) -> str:
+    return " ".join(t.get_text() for t in ax.texts)
+
+
+def test_the_frenet_diagram_names_every_quantity_of_the_model():
+    ax = schematics.draw_frenet_frame()
+    text = _texts(ax)
+    for symbol in ("$s$", "$e_y$", r"$e_\psi$", "$v_x$", "$v_y$", "$r$", r"$\delta$", "$l_f$"):
+        assert symbol in text, symbol
+    plt.close(ax.figure)
+
+
+def test_the_pipeline_diagram_has_every_stage_and_the_loop():
+    ax = schematics.draw_pipeline()
+    text = _texts(ax)
+    for stage in ("curvature QP", "time-optimal", "coupled MPC", "simulated car", "CMA-ES"):
+        assert stage in text, stage
+    for flow in ("warm start", "steer, pedal", "state", "weights", "lap score"):
+        assert flow in text, flow
+    plt.close(ax.figure)
+
+
+@pytest.fixture(scope="module")
+def circle_lap():
+    """A made-up lap round the circle track: 40 s at 20 m/s."""
+    from types import SimpleNamespace
+
+    from racing_lib.tracks import circle_track
+
+    track = circle_track(radius=100.0, width=10.0)
+    t = np.arange(0.0, 40.0, 0.1)
+    angle = 0.2 * t
+    log = SimpleNamespace(
+        t=t, x=100.0 * np.cos(angle), y=100.0 * np.sin(angle), vx=np.full(t.size, 20.0),
+        in_lap=(t > 1.0) & (t < 32.0),
+    )  # fmt: skip
+    return track, log
+
+
+def test_the_lap_animation_follows_the_lap(circle_lap):
+    track, log = circle_lap
+    anim = plotting.lap_animation(track, log, frames=12)
+    frames = list(anim.new_frame_seq())
+    assert len(frames) == 12
+    path, car, label = anim._func(11)  # the last frame: the end of the lap, with its trail
+    x, y = car.get_data()
+    last = int(np.flatnonzero(log.in_lap)[-1])
+    assert x[0] == pytest.approx(log.x[last]) and y[0] == pytest.approx(log.y[last])
+    assert len(path.get_data()[0]) == 81  # 8 s of trail at 0.1 s
+    assert "72 km/h" in label.get_text()
+    html = anim.to_jshtml()
+    assert html.count("data:image/png;base64") == 12
+
+
+def test_the_lap_time_plot_marks_wall_contacts_and_plans():
+    trial = {"completed": True, "lap_time_s": 106.0, "wall_contacts": 0}
+    rows = [
+        {"name": "clean", "planned_lap_time_s": 105.0, "trial_metrics": [trial, trial]},
+        {"name": "walls", "planned_lap_time_s": 104.0,
+         "trial_metrics": [trial, {**trial, "lap_time_s": 107.0, "wall_contacts": 2}]},
+    ]  # fmt: skip
+    ax = plotting.plot_lap_times(rows, best=103.0)
+    dots = [c for c in ax.collections]
+    colors = [tuple(np.round(c, 3)) for d in dots for c in d.get_facecolors()]
+    red = tuple(np.round(matplotlib.colors.to_rgba("crimson"), 3))
+    assert colors.count(red) == 1
+    assert [t.get_text() for t in ax.get_yticklabels()] == ["clean", "walls"]
+    plt.close(ax.figure)
+
+
+def test_the_corner_zooms_are_labelled_in_metres():
+    track = load_track("expressway")
+    corners = corner_positions(track)
+    fig, axes = plotting.plot_corners(track, corners)
+    assert axes[0].get_ylabel() == "y [m]" and axes[3].get_ylabel() == "y [m]"
+    assert axes[1].get_ylabel() == ""
+    assert all(ax.get_xlabel() == "x [m]" for ax in axes[3:6])
+    plt.close(fig)
