@@ -16,8 +16,7 @@ Formulation choices, each measured on real circuits before it was adopted:
 * **A starting barrier for a warm start**: the warm start sits on many active constraints (track
   edges, tyre limits), where IPOPT's defaults made its adaptive barrier collapse and the iterates
   creep (40-168 iterations on real circuits); a small ``mu_init`` with bound multipliers
-  ``mu / slack`` (:data:`STARTING_BARRIER`) brought it to 21-34, a little fewer than the cold
-  start's 24-37.
+  ``mu / slack`` (:data:`STARTING_BARRIER`) brought it to 23-36, level with the cold start.
 * **Tyres below their peak**: |alpha_f|, |alpha_r| <= the slip angle where the Pacejka force
   reaches 95 % of its peak (``slip_force_share``,
   :meth:`racing_lib.model.ModelParams.slip_angle_at`). Past the peak the optimum is degenerate
@@ -96,12 +95,13 @@ _NXS = NXS
 #: ``mu / slack``. With IPOPT's defaults (mu_init 0.1, multipliers 1) the adaptive barrier fell
 #: to 1e-7 within a few iterations of the warm start, which sits on many active constraints, and
 #: then crept along in short steps: 40-168 iterations on ten real circuits and the two built-in
-#: tracks (plan's defaults). Measured there with mu-based multipliers (iterations warm / cold,
-#: medians over the 12 tracks): mu_init 1e-4 29.5 / 29.5, 1e-6 26 / 28 (the warm start fewer on
-#: 9 of 12), to the same lap times within 0.005 % (benchmarks/bench_plan_speed.py); 1e-5 and
-#: 1e-3 were no better, and shrinking bound_push/bound_frac as well cost 5-15 iterations.
+#: tracks (plan's defaults). With these options: warm 23-36, cold 22-45, to the same lap times
+#: within 0.005 % (benchmarks/bench_plan_speed.py). mu_init 1e-6 saved a few more iterations
+#: (medians warm / cold 26 / 28 against 29.5 / 29.5) but made the best-lap NLP, which starts from
+#: this plan, end on an OpenBLAS-kernel-dependent solution (lap 20.389 s under Sandybridge against
+#: 20.380 s), so 1e-4 stays: with it both kernels give the same plans.
 STARTING_BARRIER: tuple[tuple[str, Any], ...] = (
-    ("mu_init", 1e-6),
+    ("mu_init", 1e-4),
     ("bound_mult_init_method", "mu-based"),
 )
 
