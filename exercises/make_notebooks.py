@@ -643,6 +643,27 @@ print("predicted e_y [m]:   ", np.round(np.array(x)[:6, 0], 3))""",
 # --------------------------------------------------------------------------------------------------
 # Chapter 06
 
+# The default constants of CMA-ES (the start of exercise 6.3's function, in template and solution).
+CMA_CONSTANTS = """    rng = np.random.default_rng(seed)
+    n = len(x0)
+    # The default strategy parameters (Hansen's tutorial): population, weights, learning rates.
+    lam = 4 + int(3 * math.log(n))  # candidates per generation
+    mu = lam // 2  # how many of them are selected
+    w = math.log(mu + 0.5) - np.log(np.arange(1, mu + 1))
+    w /= w.sum()  # recombination weights, decreasing, sum 1
+    mu_eff = 1.0 / np.sum(w**2)
+    c_s = (mu_eff + 2) / (n + mu_eff + 5)  # step-size path
+    d_s = 1 + 2 * max(0.0, math.sqrt((mu_eff - 1) / (n + 1)) - 1) + c_s
+    c_c = (4 + mu_eff / n) / (n + 4 + 2 * mu_eff / n)  # covariance path
+    c_1 = 2 / ((n + 1.3) ** 2 + mu_eff)  # rank-one update
+    c_mu = min(1 - c_1, 2 * (mu_eff - 2 + 1 / mu_eff) / ((n + 2) ** 2 + mu_eff))  # rank-mu
+    chi_n = math.sqrt(n) * (1 - 1 / (4 * n) + 1 / (21 * n * n))  # E||N(0, I)||
+    m, sigma = np.array(x0, dtype=float), float(sigma0)
+    C, p_s, p_c = np.eye(n), np.zeros(n), np.zeros(n)
+    best_x, best_f = m.copy(), f(m)
+    used = 1
+"""
+
 CH06 = Chapter(
     name="06_tuning",
     title="Exercises 06 · Tuning with CMA-ES",
@@ -735,45 +756,11 @@ whose axes differ a hundredfold in length and are tilted against the coordinates
 that learns $C$ solves it on the budget of the check.""",
             header='''def cma_es(f, x0, sigma0, budget, seed):
     """Best point found by CMA-ES minimizing f from x0 with step sigma0, in <= budget evaluations."""''',
-            template="""    rng = np.random.default_rng(seed)
-    n = len(x0)
-    # The default strategy parameters (Hansen's tutorial): population, weights, learning rates.
-    lam = 4 + int(3 * math.log(n))  # candidates per generation
-    mu = lam // 2  # how many of them are selected
-    w = math.log(mu + 0.5) - np.log(np.arange(1, mu + 1))
-    w /= w.sum()  # recombination weights, decreasing, sum 1
-    mu_eff = 1.0 / np.sum(w**2)
-    c_s = (mu_eff + 2) / (n + mu_eff + 5)  # step-size path
-    d_s = 1 + 2 * max(0.0, math.sqrt((mu_eff - 1) / (n + 1)) - 1) + c_s
-    c_c = (4 + mu_eff / n) / (n + 4 + 2 * mu_eff / n)  # covariance path
-    c_1 = 2 / ((n + 1.3) ** 2 + mu_eff)  # rank-one update
-    c_mu = min(1 - c_1, 2 * (mu_eff - 2 + 1 / mu_eff) / ((n + 2) ** 2 + mu_eff))  # rank-mu
-    chi_n = math.sqrt(n) * (1 - 1 / (4 * n) + 1 / (21 * n * n))  # E||N(0, I)||
-    m, sigma = np.array(x0, dtype=float), float(sigma0)
-    C, p_s, p_c = np.eye(n), np.zeros(n), np.zeros(n)
-    best_x, best_f = m.copy(), f(m)
-    used = 1
-    # YOUR CODE HERE: while used + lam <= budget: one generation (steps 1-5)
+            template=CMA_CONSTANTS
+            + """    # YOUR CODE HERE: while used + lam <= budget: one generation (steps 1-5)
     raise NotImplementedError""",
-            solution="""    rng = np.random.default_rng(seed)
-    n = len(x0)
-    # The default strategy parameters (Hansen's tutorial): population, weights, learning rates.
-    lam = 4 + int(3 * math.log(n))  # candidates per generation
-    mu = lam // 2  # how many of them are selected
-    w = math.log(mu + 0.5) - np.log(np.arange(1, mu + 1))
-    w /= w.sum()  # recombination weights, decreasing, sum 1
-    mu_eff = 1.0 / np.sum(w**2)
-    c_s = (mu_eff + 2) / (n + mu_eff + 5)  # step-size path
-    d_s = 1 + 2 * max(0.0, math.sqrt((mu_eff - 1) / (n + 1)) - 1) + c_s
-    c_c = (4 + mu_eff / n) / (n + 4 + 2 * mu_eff / n)  # covariance path
-    c_1 = 2 / ((n + 1.3) ** 2 + mu_eff)  # rank-one update
-    c_mu = min(1 - c_1, 2 * (mu_eff - 2 + 1 / mu_eff) / ((n + 2) ** 2 + mu_eff))  # rank-mu
-    chi_n = math.sqrt(n) * (1 - 1 / (4 * n) + 1 / (21 * n * n))  # E||N(0, I)||
-    m, sigma = np.array(x0, dtype=float), float(sigma0)
-    C, p_s, p_c = np.eye(n), np.zeros(n), np.zeros(n)
-    best_x, best_f = m.copy(), f(m)
-    used = 1
-    while used + lam <= budget:
+            solution=CMA_CONSTANTS
+            + """    while used + lam <= budget:
         values, vectors = np.linalg.eigh(C)
         scale = np.sqrt(np.maximum(values, 1e-20))  # D
         y = rng.standard_normal((lam, n)) * scale @ vectors.T  # y_i = B D z_i, one per row

@@ -128,7 +128,9 @@ def check_peak_slip_angle(peak_slip_angle) -> CheckResult:
 
 def _point_mass_lap_time(ds: float, v: np.ndarray) -> float:
     """Lap time (s) of node speeds v (m/s), uniform acceleration between nodes ``ds`` apart."""
-    return float(np.sum(2.0 * ds / (v + np.roll(v, -1))))
+    from racing_lib.planning.speed import segment_times
+
+    return float(np.sum(segment_times(ds, v, np.roll(v, -1))))
 
 
 @functools.lru_cache(maxsize=4)
