@@ -3,6 +3,11 @@ distribution show the lap they are given, the corner zooms are labelled."""
 
 from __future__ import annotations
 
+import ast
+import json
+import re
+from pathlib import Path
+
 import matplotlib
 
 matplotlib.use("Agg")
@@ -89,7 +94,94 @@ def test_the_corner_zooms_are_labelled_in_metres():
     track = load_track("expressway")
     corners = corner_positions(track)
     fig, axes = plotting.plot_corners(track, corners)
-    assert axes[0].get_ylabel() == "y [m]" and axes[3].get_ylabel() == "y [m]"
+    assert axes[0].get_ylabel() == "$y$ [m]" and axes[3].get_ylabel() == "$y$ [m]"
     assert axes[1].get_ylabel() == ""
-    assert all(ax.get_xlabel() == "x [m]" for ax in axes[3:6])
+    assert all(ax.get_xlabel() == "$x$ [m]" for ax in axes[3:6])
     plt.close(fig)
+
+
+# --- what every figure of the course may use: a size for the column, fonts a reader can read and
+# --- symbols typeset as math. Read from the source, so a new cell is checked the day it is written.
+
+_ROOT = Path(__file__).resolve().parents[1]
+_LABEL_CALLS = {"set_xlabel", "set_ylabel", "set_title", "suptitle", "annotate", "text"}
+_LABEL_KEYWORDS = {"xlabel", "ylabel", "title", "label"}
+# A symbol written in plain text: an identifier with a subscript such as e_y, v_x or r_ss.
+_PLAIN_SYMBOL = re.compile(r"\b[A-Za-z]+_[A-Za-z0-9]+\b")
+
+
+def _figure_sources() -> list[tuple[str, str]]:
+    sources = []
+    for notebook in sorted((_ROOT / "notebooks").glob("*.ipynb")):
+        cells = json.loads(notebook.read_text())["cells"]
+        for number, cell in enumerate(cells):
+            if cell["cell_type"] == "code":
+                lines = "".join(cell["source"]).splitlines(keepends=True)
+                code = "".join(line for line in lines if not line.lstrip().startswith(("%", "!")))
+                sources.append((f"{notebook.name} cell {number}", code))
+    for module in sorted((_ROOT / "racing_lib" / "face").glob("*.py")):
+        sources.append((module.name, module.read_text()))
+    return sources
+
+
+def _literal_strings(node: ast.AST) -> list[str]:
+    if isinstance(node, ast.Constant) and isinstance(node.value, str):
+        return [node.value]
+    if isinstance(node, ast.JoinedStr):
+        return ["".join(v.value if isinstance(v, ast.Constant) else "{}" for v in node.values)]
+    if isinstance(node, ast.Tuple | ast.List):
+        return [s for element in node.elts for s in _literal_strings(element)]
+    return []
+
+
+def _calls(source: str) -> list[ast.Call]:
+    return [node for node in ast.walk(ast.parse(source)) if isinstance(node, ast.Call)]
+
+
+def _outside_math(text: str) -> str:
+    return "".join(text.split("$")[0::2])
+
+
+def test_every_figure_fits_the_book_column_and_uses_readable_fonts():
+    too_wide, too_small = [], []
+    for where, source in _figure_sources():
+        for call in _calls(source):
+            for keyword in call.keywords:
+                value = keyword.value
+                if keyword.arg == "figsize" and isinstance(value, ast.Tuple):
+                    width = value.elts[0]
+                    if isinstance(width, ast.Constant) and width.value > plotting.COLUMN_WIDTH_IN:
+                        too_wide.append(f"{where}: figsize width {width.value} in")
+                if keyword.arg == "fontsize" and isinstance(value, ast.Constant):
+                    if (
+                        isinstance(value.value, int | float)
+                        and value.value < plotting.SMALLEST_FONT_PT
+                    ):
+                        too_small.append(f"{where}: fontsize {value.value}")
+    assert not too_wide, f"wider than the book's column ({plotting.COLUMN_WIDTH_IN} in): {too_wide}"
+    assert not too_small, f"smaller than {plotting.SMALLEST_FONT_PT} pt: {too_small}"
+
+
+def test_axis_labels_and_legends_typeset_their_symbols():
+    plain = []
+    for where, source in _figure_sources():
+        for call in _calls(source):
+            name = getattr(call.func, "attr", getattr(call.func, "id", ""))
+            texts = [s for a in call.args[:1] if name in _LABEL_CALLS for s in _literal_strings(a)]
+            texts += [
+                s
+                for k in call.keywords
+                if k.arg in _LABEL_KEYWORDS or (k.arg or "").endswith("label")
+                for s in _literal_strings(k.value)
+            ]
+            plain += [f"{where}: {t!r}" for t in texts if _PLAIN_SYMBOL.search(_outside_math(t))]
+    assert not plain, f"write symbols as math ($e_y$, not e_y): {plain}"
+
+
+def test_the_checks_above_catch_a_wide_figure_and_a_plain_symbol():
+    source = 'fig, ax = plt.subplots(figsize=(12, 3))\nax.set_ylabel("e_y [m]")\n'
+    (call_subplots, call_label) = sorted(_calls(source), key=lambda c: c.lineno)[:2]
+    assert call_subplots.keywords[0].value.elts[0].value > plotting.COLUMN_WIDTH_IN
+    text = _literal_strings(call_label.args[0])[0]
+    assert _PLAIN_SYMBOL.search(_outside_math(text))
+    assert not _PLAIN_SYMBOL.search(_outside_math("$e_y$ [m]"))

@@ -214,15 +214,15 @@ def _save_lap_outputs(out_dir: FilePath, track, trajectory, results, report) -> 
     ax = plotting.plot_track(track, {"plan": trajectory, "closed loop": log})
     atomic_savefig(ax.figure, out_dir / "track.png", dpi=130, bbox_inches="tight")
     plt.close(ax.figure)
-    fig, axes = plt.subplots(2, 1, figsize=(10, 5.5), sharex=True)
+    fig, axes = plt.subplots(2, 1, figsize=(9, 5), sharex=True)
     lap = log.in_lap
     plotting.plot_profiles(
         {"plan": trajectory.s, "closed loop": log.s_ref[lap]},
         {"plan": trajectory.vx, "closed loop": log.vx[lap]},
         ax=axes[0],
-        ylabel="v_x [m/s]",
+        ylabel="$v_x$ [m/s]",
     )
-    plotting.plot_profiles(log.s_ref[lap], {"e_y": log.ey[lap]}, ax=axes[1], ylabel="e_y [m]")
+    plotting.plot_profiles(log.s_ref[lap], {"e_y": log.ey[lap]}, ax=axes[1], ylabel="$e_y$ [m]")
     atomic_savefig(fig, out_dir / "profiles.png", dpi=130, bbox_inches="tight")
     plt.close(fig)
     atomic_write_json(out_dir / "summary.json", _clean(report))

@@ -30,6 +30,15 @@ COLORS: dict[str, str] = {
 }
 
 
+#: The widest figure that the book shows at its natural size [in]: its text column is about 900 px
+#: wide on a desktop screen, and figures are drawn at 100 dpi. A wider figure is shrunk into the
+#: column, and its legends with it; ``tests/test_figures.py`` keeps every figure within this.
+COLUMN_WIDTH_IN = 9.0
+
+#: The smallest font size [pt] a figure may use, for the same reason.
+SMALLEST_FONT_PT = 8.0
+
+
 def set_style() -> None:
     """The course's matplotlib defaults (sizes readable in a notebook and in the book)."""
     plt.rcParams.update(
@@ -131,8 +140,8 @@ def plot_track(
                 bbox={"boxstyle": "circle", "fc": "white", "ec": "0.2"},
             )
     ax.set_aspect("equal")
-    ax.set_xlabel("x [m]")
-    ax.set_ylabel("y [m]")
+    ax.set_xlabel("$x$ [m]")
+    ax.set_ylabel("$y$ [m]")
     ax.legend(loc="best", fontsize=8)
     return ax
 
@@ -181,8 +190,8 @@ def plot_corners(
         grid_spec = ax.get_subplotspec()
         first_col = grid_spec is None or grid_spec.is_first_col()
         last_row = grid_spec is None or grid_spec.is_last_row() or k + 3 >= n
-        ax.set_ylabel("y [m]" if first_col else "")
-        ax.set_xlabel("x [m]" if last_row else "")
+        ax.set_ylabel("$y$ [m]" if first_col else "")
+        ax.set_xlabel("$x$ [m]" if last_row else "")
     if lines:
         # One legend for the grid, below it: which line is which in every panel.
         handles, labels = axes[0].get_legend_handles_labels()
@@ -232,7 +241,7 @@ def plot_profiles(
                 va="bottom",
                 fontsize=8,
             )
-    ax.set_xlabel("s [m]")
+    ax.set_xlabel("$s$ [m]")
     ax.set_ylabel(ylabel)
     ax.legend(loc="best", fontsize=8)
     return ax
