@@ -10,14 +10,18 @@
 # that raises -- fails the build (-W), after reporting all of them (--keep-going). Then the pages
 # are read as a reader gets them (book/check_rendered.py): raw $$, \begin{, a pipe table or a
 # Python repr on any page, or fewer equations than the source holds, fails the build too.
+# With RACING_LAB_REPOSITORY=https://github.com/<owner>/<repo>, every chapter gets a launch-on-Binder
+# button (book/launch_config.py); without it the book is the same, offline, without buttons.
 # Extra arguments are passed on to jupyter-book (e.g. --all to rebuild every page).
 set -euo pipefail
 repo="$(cd "$(dirname "$0")/.." && pwd)"
 cd "$repo"
 export RACING_LIB_FAST="${RACING_LIB_FAST:-1}"
 start=$(date +%s)
+# Launch buttons (Binder) only when RACING_LAB_REPOSITORY names the published repository.
+config="$(python "$repo/book/launch_config.py")"
 jupyter-book build . \
-  --config book/_config.yml \
+  --config "$config" \
   --toc book/_toc.yml \
   --path-output book \
   --warningiserror --keep-going \

@@ -248,3 +248,84 @@ def test_the_rendered_page_check_catches_glued_display_math(tmp_path):
         page = tmp_path / "ch.html"
         page.write_text(f"<html><body>{md.render(text)}</body></html>")
         assert bool(check.check_page(page, source)) == broken, md.render(text)
+
+
+# --- launch buttons: Binder builds the course from binder/, and the book links to it once it is
+# --- told where the repository lives.
+
+
+def _launch_config():
+    spec = importlib.util.spec_from_file_location("launch_config", BOOK / "launch_config.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_binder_installs_the_course_as_the_readme_does():
+    post_build = (REPO / "binder" / "postBuild").read_text()
+    assert os.access(REPO / "binder" / "postBuild", os.X_OK)
+    install = [line for line in post_build.splitlines() if line.startswith("pip install")]
+    assert install and "-e" in install[0] and "book" in install[0] and "test" in install[0]
+    runtime = (REPO / "binder" / "runtime.txt").read_text().strip()
+    major, minor = (int(part) for part in runtime.removeprefix("python-").split("."))
+    requires = re.search(
+        r'requires-python = ">=(\d+)\.(\d+)"', (REPO / "pyproject.toml").read_text()
+    )
+    assert (major, minor) >= (int(requires[1]), int(requires[2]))
+
+
+def test_launch_buttons_appear_only_with_a_repository(tmp_path, monkeypatch, capsys):
+    launch = _launch_config()
+    base = yaml.safe_load((BOOK / "_config.yml").read_text())
+    assert not base["launch_buttons"]["binderhub_url"]  # the offline book has no buttons
+
+    config = launch.launch_config(base, "https://github.com/someone/racing-lab/", branch="dev")
+    assert config["repository"]["url"] == "https://github.com/someone/racing-lab"
+    assert config["repository"]["branch"] == "dev"
+    assert config["launch_buttons"]["binderhub_url"] == "https://mybinder.org"
+    assert config["sphinx"] == base["sphinx"] and config["execute"] == base["execute"]
+    assert not base["launch_buttons"]["binderhub_url"]  # the original is not changed
+    with pytest.raises(ValueError, match="RACING_LAB_REPOSITORY must be a web address"):
+        launch.launch_config(base, "someone/racing-lab")
+
+    monkeypatch.delenv("RACING_LAB_REPOSITORY", raising=False)
+    assert launch.main() == 0
+    assert capsys.readouterr().out.strip() == str(BOOK / "_config.yml")
+
+    target = tmp_path / "_config.launch.yml"
+    monkeypatch.setattr(launch, "BOOK", tmp_path)
+    (tmp_path / "_config.yml").write_text((BOOK / "_config.yml").read_text())
+    monkeypatch.setenv("RACING_LAB_REPOSITORY", "https://github.com/someone/racing-lab")
+    assert launch.main() == 0
+    assert capsys.readouterr().out.strip() == str(target)
+    written = yaml.safe_load(target.read_text())
+    assert written["launch_buttons"]["binderhub_url"] == "https://mybinder.org"
+
+    monkeypatch.setenv("RACING_LAB_REPOSITORY", "not a url")
+    assert launch.main() == 2
+    assert "must be a web address" in capsys.readouterr().err
+
+
+@pytest.mark.skipif(shutil.which("jupyter-book") is None, reason="needs the [book] extras")
+def test_a_book_built_with_a_repository_links_each_notebook_to_binder(tmp_path):
+    """A one-chapter book with the written configuration: its notebook page gets the Binder link."""
+    launch = _launch_config()
+    base = yaml.safe_load((BOOK / "_config.yml").read_text())
+    config = launch.launch_config(base, "https://github.com/someone/racing-lab")
+    # Only what a one-page book without our static files and extensions can take.
+    config["sphinx"].pop("local_extensions")
+    for key in ("html_static_path", "html_css_files"):
+        config["sphinx"]["config"].pop(key)
+    config["execute"]["execute_notebooks"] = "off"
+    (tmp_path / "_config.yml").write_text(yaml.safe_dump(config))
+    (tmp_path / "_toc.yml").write_text("format: jb-book\nroot: intro\nchapters:\n- file: chapter\n")
+    (tmp_path / "intro.md").write_text("# A book\n")
+    shutil.copy(REPO / "notebooks" / "00_introduction.ipynb", tmp_path / "chapter.ipynb")
+    done = subprocess.run(
+        ["jupyter-book", "build", str(tmp_path)], capture_output=True, text=True, timeout=300
+    )
+    assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-2000:]
+    page = (tmp_path / "_build" / "html" / "chapter.html").read_text()
+    assert (
+        "https://mybinder.org/v2/gh/someone/racing-lab/main?urlpath=lab/tree/chapter.ipynb" in page
+    )
