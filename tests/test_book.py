@@ -254,11 +254,16 @@ def test_the_rendered_page_check_catches_glued_display_math(tmp_path):
 # --- told where the repository lives.
 
 
-def _launch_config():
-    spec = importlib.util.spec_from_file_location("launch_config", BOOK / "launch_config.py")
+def _book_script(name: str):
+    """The module of ``book/<name>.py`` (the book's scripts are not a package)."""
+    spec = importlib.util.spec_from_file_location(name, BOOK / f"{name}.py")
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
+
+
+def _launch_config():
+    return _book_script("launch_config")
 
 
 def test_binder_installs_the_course_as_the_readme_does():
@@ -329,3 +334,33 @@ def test_a_book_built_with_a_repository_links_each_notebook_to_binder(tmp_path):
     assert (
         "https://mybinder.org/v2/gh/someone/racing-lab/main?urlpath=lab/tree/chapter.ipynb" in page
     )
+
+
+def test_the_parallel_run_executes_every_notebook_the_book_shows():
+    listed = _book_script("execute").toc_notebooks()
+    expected = sorted(REPO.glob("notebooks/*.ipynb")) + sorted(REPO.glob("exercises/0*.ipynb"))
+    assert sorted(listed) == sorted(expected)
+    assert not any("solutions" in str(nb) for nb in listed)
+
+
+def test_the_build_finds_the_parallel_runs_outputs_and_reruns_a_failed_notebook(tmp_path):
+    """What book/execute.py caches, myst-nb's cache mode matches; a failed run is not cached."""
+    jupyter_cache = pytest.importorskip("jupyter_cache", reason="needs the [book] extras")
+    nbformat = pytest.importorskip("nbformat")
+    good, bad = tmp_path / "good.ipynb", tmp_path / "bad.ipynb"
+    for path, code in ((good, "print(6 * 7)"), (bad, "raise ValueError('on purpose')")):
+        nb = nbformat.v4.new_notebook(cells=[nbformat.v4.new_code_cell(code)])
+        nb.metadata["kernelspec"] = {"name": "python3", "display_name": "Python 3"}
+        nbformat.write(nb, path)
+    cache_path = tmp_path / "cache"
+    (cache_path / "stale").mkdir(parents=True)  # an earlier build's cache: emptied first
+
+    failed = _book_script("execute").execute_all([good, bad], cache_path, timeout=60)
+
+    assert failed == [bad]
+    assert not (cache_path / "stale").exists()
+    cache = jupyter_cache.get_cache(str(cache_path))
+    _, merged = cache.merge_match_into_notebook(nbformat.read(good, as_version=4))
+    assert merged.cells[0].outputs[0]["text"].strip() == "42"
+    with pytest.raises(KeyError):
+        cache.match_cache_notebook(nbformat.read(bad, as_version=4))

@@ -1,0 +1,119 @@
+"""Run the book's notebooks in parallel, one per core, before the book is built.
+
+Jupyter Book 1 executes the notebooks one after another while Sphinx reads them, so a build on two
+cores used one of them for most of its time. This script executes every notebook of the table of
+contents in a pool of worker processes (jupyter-cache's ``local-parallel`` executor: one kernel per
+worker, each notebook run in its own folder, as the book runs it) and stores the executed notebooks
+in the book's jupyter-cache. The build (``execute_notebooks: cache`` in ``_config.yml``) then
+takes each notebook's outputs from that cache, matched by the notebook's code, and executes itself
+any notebook whose run failed here, so that a failing cell is still reported by the build (and
+fails it).
+
+The cache is emptied first, on every run: a notebook's outputs depend on ``racing_lib`` as well as
+on its own code, and the cache only sees the code, so outputs kept from an earlier build could be
+stale.
+
+Run by ``book/build.sh``; by hand: ``python book/execute.py`` (from anywhere).
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import sys
+import time
+from pathlib import Path
+
+import yaml
+
+REPO = Path(__file__).resolve().parent.parent
+TOC = REPO / "book" / "_toc.yml"
+CONFIG = REPO / "book" / "_config.yml"
+#: Where myst-nb looks by default with ``--path-output book``: ``<build folder>/.jupyter_cache``.
+CACHE = REPO / "book" / "_build" / ".jupyter_cache"
+
+
+def toc_notebooks(toc: Path = TOC, root: Path = REPO) -> list[Path]:
+    """The notebooks that the table of contents puts in the book, in its order.
+
+    Parameters
+    ----------
+    toc : Path
+        The ``_toc.yml`` (paths in it are relative to ``root``, without a suffix).
+    root : Path
+        The book's source root.
+
+    Returns
+    -------
+    list of Path
+        Every ``.ipynb`` named by a ``file:`` entry or matched by a ``glob:`` entry.
+    """
+    found: list[Path] = []
+
+    def walk(node: object) -> None:
+        if isinstance(node, dict):
+            if "file" in node:
+                candidate = root / f"{node['file']}.ipynb"
+                if candidate.exists():
+                    found.append(candidate)
+            if "glob" in node:
+                found.extend(sorted(root.glob(f"{node['glob']}.ipynb")))
+            for value in node.values():
+                walk(value)
+        elif isinstance(node, list):
+            for item in node:
+                walk(item)
+
+    walk(yaml.safe_load(toc.read_text(encoding="utf-8")))
+    return list(dict.fromkeys(found))
+
+
+def execute_all(notebooks: list[Path], cache_path: Path, timeout: int) -> list[Path]:
+    """Execute ``notebooks`` in parallel into a fresh jupyter-cache at ``cache_path``.
+
+    Parameters
+    ----------
+    notebooks : list of Path
+        The notebooks to run.
+    cache_path : Path
+        The cache folder; removed and created anew.
+    timeout : int
+        Seconds any one cell may take (the book's ``execute.timeout``).
+
+    Returns
+    -------
+    list of Path
+        The notebooks whose run failed (the build runs them again and reports the error).
+    """
+    from jupyter_cache import get_cache
+    from jupyter_cache.executors import load_executor
+
+    shutil.rmtree(cache_path, ignore_errors=True)
+    cache = get_cache(str(cache_path))
+    for nb in notebooks:
+        cache.add_nb_to_project(str(nb))
+    executor = load_executor("local-parallel", cache=cache)
+    result = executor.run_and_cache(timeout=timeout, allow_errors=False)
+    return [Path(uri) for uri in (*result.excepted, *result.errored)]
+
+
+def main() -> int:
+    """Execute the book's notebooks and print what happened; 0 unless nothing could run."""
+    config = yaml.safe_load(CONFIG.read_text(encoding="utf-8"))
+    timeout = int(config.get("execute", {}).get("timeout", 300))
+    notebooks = toc_notebooks()
+    start = time.perf_counter()
+    failed = execute_all(notebooks, CACHE, timeout)
+    elapsed = time.perf_counter() - start
+    print(
+        f"book: executed {len(notebooks) - len(failed)} of {len(notebooks)} notebooks in "
+        f"{elapsed:.0f} s on {os.cpu_count()} cores"
+    )
+    for nb in failed:
+        # Not fatal here: the build executes this notebook again and fails with its error.
+        print(f"book: {nb.relative_to(REPO)} failed; the build runs it again and reports why")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
