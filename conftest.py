@@ -13,6 +13,18 @@ import pytest
 os.environ.setdefault("RACING_LIB_FAST", "1")
 matplotlib.use("Agg")
 
+# Under pytest-xdist every core already runs a worker: a BLAS that also starts a thread per core
+# oversubscribes them, and its threads' busy waiting made dense solves several times slower (an
+# exercise's reference solve went from 4 s to over 12 s beside one busy process). One BLAS thread
+# per worker, and per notebook kernel the worker starts (they inherit the environment).
+if os.environ.get("PYTEST_XDIST_WORKER"):
+    for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ.setdefault(_var, "1")
+    from threadpoolctl import threadpool_limits
+
+    # Also for a BLAS this process loaded before the variables were set (kept: it stays applied).
+    _ONE_BLAS_THREAD = threadpool_limits(1)
+
 REPO = Path(__file__).resolve().parent
 SHARED_TRACKS = REPO.parent / "shared" / "tracks"
 

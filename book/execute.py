@@ -102,6 +102,9 @@ def main() -> int:
     config = yaml.safe_load(CONFIG.read_text(encoding="utf-8"))
     timeout = int(config.get("execute", {}).get("timeout", 300))
     notebooks = toc_notebooks()
+    # One kernel per core already: a BLAS thread per core in each kernel would oversubscribe them.
+    for var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ.setdefault(var, "1")
     start = time.perf_counter()
     failed = execute_all(notebooks, CACHE, timeout)
     elapsed = time.perf_counter() - start
