@@ -7,8 +7,7 @@ and solve, nothing cached from an earlier track) in three ways:
   differentiated by CasADi (``graph="sx"``) and IPOPT's own starting point (``mu_init`` 0.1,
   bound multipliers 1), warm-started from the QP;
 * ``warm``: the default (structured NLP, :data:`~racing_lib.planning.time_optimal.
-  STARTING_BARRIER`), warm-started from the QP's plan pulled off its constraints
-  (:data:`~racing_lib.planning.time_optimal.WARM_START_PULL`);
+  STARTING_BARRIER`), warm-started from the QP;
 * ``cold``: the default from the centerline at 10 m/s.
 
 Per track it prints IPOPT iterations, the build time, the wall time of the whole call (median

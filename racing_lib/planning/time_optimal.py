@@ -16,10 +16,7 @@ Formulation choices, each measured on real circuits before it was adopted:
 * **A starting barrier for a warm start**: the warm start sits on many active constraints (track
   edges, tyre limits), where IPOPT's defaults made its adaptive barrier collapse and the iterates
   creep (40-168 iterations on real circuits); a small ``mu_init`` with bound multipliers
-  ``mu / slack`` (:data:`STARTING_BARRIER`) brought it to about the cold start's count.
-* **The warm start pulled off its constraints**: the QP's line a fifth of the way towards the
-  corridor's middle and its speeds 3 % below the limit (:data:`WARM_START_PULL`); from there the
-  warm start needs no more iterations than the cold start on every measured circuit.
+  ``mu / slack`` (:data:`STARTING_BARRIER`) brought it to 23-36, level with the cold start.
 * **Tyres below their peak**: |alpha_f|, |alpha_r| <= the slip angle where the Pacejka force
   reaches 95 % of its peak (``slip_force_share``,
   :meth:`racing_lib.model.ModelParams.slip_angle_at`). Past the peak the optimum is degenerate
@@ -98,7 +95,7 @@ _NXS = NXS
 #: ``mu / slack``. With IPOPT's defaults (mu_init 0.1, multipliers 1) the adaptive barrier fell
 #: to 1e-7 within a few iterations of the warm start, which sits on many active constraints, and
 #: then crept along in short steps: 40-168 iterations on ten real circuits and the two built-in
-#: tracks (plan's defaults). With these options, when adopted: warm 23-36, cold 22-45, same laps
+#: tracks (plan's defaults). With these options: warm 23-36, cold 22-45, to the same lap times
 #: within 0.005 % (benchmarks/bench_plan_speed.py). mu_init 1e-6 saved a few more iterations
 #: (medians warm / cold 26 / 28 against 29.5 / 29.5) but made the best-lap NLP, which starts from
 #: this plan, end on an OpenBLAS-kernel-dependent solution (lap 20.389 s under Sandybridge against
@@ -107,18 +104,6 @@ STARTING_BARRIER: tuple[tuple[str, Any], ...] = (
     ("mu_init", 1e-4),
     ("bound_mult_init_method", "mu-based"),
 )
-
-
-#: How far the warm start is moved off the constraints it touches: (share of the line's offset from
-#: the corridor's middle that is kept, share of the speed profile that is kept). The QP's plan runs
-#: at the limit speed profile and touches the track's edges at its apexes, so dozens of the NLP's
-#: constraints start active, which an interior-point method must first back away from. Measured on
-#: ten real circuits and the two built-in tracks (benchmarks/bench_plan_speed.py): unpulled, the
-#: warm start took 26-51 IPOPT iterations and needed more than the cold start on 6 of 12 tracks;
-#: (0.8, 0.97) took 20-44 and no more than the cold start on any, to the same lap times (within
-#: 1 ms). Pulling the line alone, or the speeds alone, did not help; the speeds pulled by 7 % made
-#: one circuit (Melbourne) end in another local optimum, 14 ms slower.
-WARM_START_PULL: tuple[float, float] = (0.8, 0.97)
 
 
 def _shape_settings(st: TimeOptimalSettings) -> TimeOptimalSettings:
@@ -222,17 +207,12 @@ def _initial_guess(
                 return np.asarray(a, float)
             return np.interp(sq, src.grid.s, a, period=period)
 
-        # Into the interior of the constraints the QP's plan touches (WARM_START_PULL): its line
-        # towards the middle of the corridor, its speeds a little below the limit profile, its
-        # accelerations with the square of the speed.
-        pull_line, pull_speed = WARM_START_PULL
-        middle = 0.5 * (grid.ey_min + grid.ey_max)
-        z[rows["VX"]] = pull_speed * get(src.v_x)
-        z[rows["EY"]] = middle + pull_line * (get(src.e_y) - middle)
+        z[rows["VX"]] = get(src.v_x)
+        z[rows["EY"]] = get(src.e_y)
         z[rows["EPSI"]] = get(src.e_psi)
         z[rows["DELTA"]] = get(src.delta)
-        z[rows["AX"]] = pull_speed**2 * get(src.a_x)
-        z[rows["VY"]] = pull_speed * get(src.v_y)
+        z[rows["AX"]] = get(src.a_x)
+        z[rows["VY"]] = get(src.v_y)
         # The QP's yaw rate belongs to its reduced speed v_hat: use the line's at full speed.
         z[rows["R"]] = get(src.trajectory.r)
         kind = "warm"
