@@ -19,12 +19,14 @@ networking, sync or updates, so it touches nothing outside a temporary directory
 from __future__ import annotations
 
 import argparse
+import os
 import re
 import shutil
 import subprocess
 import sys
 import tempfile
 import zlib
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 BOOK = Path(__file__).resolve().parent
@@ -147,6 +149,41 @@ def screenshot(chromium: str, page: Path, png: Path, height: int = WINDOW[1]) ->
         )
 
 
+def shoot_page(chromium: str, rel: str, height: int) -> tuple[str, list[str]]:
+    """Screenshot one page and count its typeset equations: (report line, problems found).
+
+    Parameters
+    ----------
+    chromium : str
+        The browser's executable.
+    rel : str
+        The page, relative to ``book/_build/html``.
+    height : int
+        Window height, px.
+    """
+    page = HTML / rel
+    if not page.exists():
+        return "", [f"screenshot: {page} does not exist; build the book first"]
+    png = OUT / (rel.replace("/", "_").removesuffix(".html") + ".png")
+    png.unlink(missing_ok=True)
+    screenshot(chromium, page, png, height)
+    width, got_height, levels = _png_stats(png)
+    want, typeset = typeset_count(chromium, page)
+    report = (
+        f"screenshot: {png.relative_to(BOOK.parent)} {width}x{got_height}, {levels} grey levels; "
+        f"{typeset} of {want} equations typeset"
+    )
+    problems = []
+    if (width, got_height) != (WINDOW[0], height) or 0 <= levels < 8:
+        problems.append(f"screenshot: {png.name} looks blank or has the wrong size")
+    if typeset < want:
+        problems.append(
+            f"screenshot: {rel}: MathJax typeset {typeset} of {want} equations (is "
+            "_static/mathjax there? does the browser console show a TeX error?)"
+        )
+    return report, problems
+
+
 def main(argv: list[str]) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument(
@@ -167,32 +204,16 @@ def main(argv: list[str]) -> int:
         )
         return 2
     OUT.mkdir(parents=True, exist_ok=True)
+    # Each page is two Chromium processes; one page per core at a time, reported in page order.
+    with ThreadPoolExecutor(max_workers=os.cpu_count() or 1) as pool:
+        results = list(pool.map(lambda rel: shoot_page(chromium, rel, args.height), pages))
     failed = False
-    for rel in pages:
-        page = HTML / rel
-        if not page.exists():
-            print(f"screenshot: {page} does not exist; build the book first", file=sys.stderr)
-            failed = True
-            continue
-        png = OUT / (rel.replace("/", "_").removesuffix(".html") + ".png")
-        png.unlink(missing_ok=True)
-        screenshot(chromium, page, png, args.height)
-        width, height, levels = _png_stats(png)
-        want, typeset = typeset_count(chromium, page)
-        print(
-            f"screenshot: {png.relative_to(BOOK.parent)} {width}x{height}, {levels} grey levels; "
-            f"{typeset} of {want} equations typeset"
-        )
-        if (width, height) != (WINDOW[0], args.height) or 0 <= levels < 8:
-            print(f"screenshot: {png.name} looks blank or has the wrong size", file=sys.stderr)
-            failed = True
-        if typeset < want:
-            print(
-                f"screenshot: {rel}: MathJax typeset {typeset} of {want} equations (is "
-                "_static/mathjax there? does the browser console show a TeX error?)",
-                file=sys.stderr,
-            )
-            failed = True
+    for report, problems in results:
+        if report:
+            print(report)
+        for problem in problems:
+            print(problem, file=sys.stderr)
+        failed = failed or bool(problems)
     return 1 if failed else 0
 
 
