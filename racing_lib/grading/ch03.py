@@ -238,7 +238,6 @@ def _curvature_cost(oval: OvalTrack, n: np.ndarray) -> float:
 
 
 @functools.lru_cache(maxsize=4)
-@functools.lru_cache(maxsize=4)
 def _min_curvature_reference(margin: float) -> tuple[np.ndarray, float]:
     """The optimum of exercise 3.4 by another method: bounded least squares (SciPy's BVLS).
 
