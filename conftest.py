@@ -18,11 +18,9 @@ matplotlib.use("Agg")
 # exercise's reference solve went from 4 s to over 12 s beside one busy process). One BLAS thread
 # per worker, and per notebook kernel the worker starts (they inherit the environment).
 if os.environ.get("PYTEST_XDIST_WORKER"):
+    for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ.setdefault(_var, "1")
     from threadpoolctl import threadpool_limits
-
-    from racing_lib.config import one_blas_thread_for_children
-
-    one_blas_thread_for_children()
 
     # Also for a BLAS this process loaded before the variables were set (kept: it stays applied).
     _ONE_BLAS_THREAD = threadpool_limits(1)

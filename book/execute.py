@@ -26,8 +26,6 @@ from pathlib import Path
 
 import yaml
 
-from racing_lib.config import one_blas_thread_for_children
-
 REPO = Path(__file__).resolve().parent.parent
 TOC = REPO / "book" / "_toc.yml"
 CONFIG = REPO / "book" / "_config.yml"
@@ -105,7 +103,8 @@ def main() -> int:
     timeout = int(config.get("execute", {}).get("timeout", 300))
     notebooks = toc_notebooks()
     # One kernel per core already: a BLAS thread per core in each kernel would oversubscribe them.
-    one_blas_thread_for_children()
+    for var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ.setdefault(var, "1")
     start = time.perf_counter()
     failed = execute_all(notebooks, CACHE, timeout)
     elapsed = time.perf_counter() - start
