@@ -95,6 +95,17 @@ def test_plan_json_has_the_documented_fields(capsys, tmp_path):
     assert "oval" in capsys.readouterr().err
 
 
+def test_planner_flags_with_a_plan_file_are_refused_in_one_line(capsys, tmp_path):
+    out = tmp_path / "centerline.csv"
+    assert main(["plan", "--method", "centerline", "--out", str(out), "--json"]) == 0
+    capsys.readouterr()
+    for flag in (["--start", "warm"], ["--spacing", "4"], ["--max-iter", "50"]):
+        assert main(["lap", "--plan", str(out), *flag, "--json"]) == 2
+        err = capsys.readouterr().err.strip()
+        assert err.startswith("error:") and len(err.splitlines()) == 1, err
+        assert "--start" in err and "racing-lib plan" in err
+
+
 def test_plan_spacing_flag_sets_the_node_spacing(capsys):
     assert main(["plan", "--method", "centerline", "--spacing", "5", "--json"]) == 0
     fields = json.loads(capsys.readouterr().out)
@@ -109,4 +120,5 @@ def test_a_failed_nlp_names_ipopt_its_status_and_only_knobs_that_exist(capsys):
     line = captured.err.strip().splitlines()[-1]
     assert line.startswith("error: time-optimal NLP") and "IPOPT returned" in line
     assert "--max-iter 6" in line and "--spacing" in line
-    assert "start='warm'" not in line  # the start was already warm: not suggested again
+    # The default start is cold, so the other start is suggested, with its flag.
+    assert "start='warm'" in line and "--start warm" in line and "--start cold" not in line

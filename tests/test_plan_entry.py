@@ -32,7 +32,7 @@ def _no_solve(*args, **kwargs):
         ({"method": "fastest"}, PlanningError, "unknown planning method"),
         ({"spacing": 0.0}, PlanningError, "between 0.5 and 20 m"),
         ({"spacing": float("nan")}, PlanningError, "between 0.5 and 20 m"),
-        ({"start": "hot"}, PlanningError, "'warm' or 'cold'"),
+        ({"start": "hot"}, PlanningError, "'cold' or 'warm'"),
         ({"grip_margin": 0.7}, PlanningError, "grip_margin"),
     ],
 )
@@ -68,3 +68,46 @@ def test_a_very_long_track_warns_of_its_cost_before_the_solve(monkeypatch):
             plan(big, method="curvature", report=lines.append)
     assert lines[0].startswith("warning: track 'ring'")
     assert "min and" in lines[0] and "GB of memory" in lines[0]
+
+
+class _Stop(Exception):
+    pass
+
+
+def test_the_nlp_starts_cold_unless_told_and_only_a_warm_start_reports_the_qp(track, monkeypatch):
+    # The cold start is the default because it was the faster plan on every circuit measured
+    # (benchmarks/bench_plan_speed.py); the warm start solves the curvature QP first.
+    starts = []
+
+    def record(*args, start, **kwargs):
+        starts.append(start)
+        raise _Stop
+
+    monkeypatch.setattr(planning, "solve_time_optimal", record)
+    reports = {}
+    for start in (None, "warm"):
+        lines = []
+        kwargs = {} if start is None else {"start": start}
+        with pytest.raises(_Stop):
+            plan(track, report=lines.append, **kwargs)
+        reports[start] = lines
+    assert starts == ["cold", "warm"] and planning.DEFAULT_START == "cold"
+    assert not any("curvature QP" in line for line in reports[None])
+    assert any("curvature QP" in line for line in reports["warm"])
+    assert any("warm start" in line for line in reports["warm"])
+
+
+def test_the_command_line_passes_its_start_to_the_planner(monkeypatch):
+    from racing_lib.face.cli import main
+
+    starts = []
+
+    def record(*args, start, **kwargs):
+        starts.append(start)
+        raise _Stop
+
+    monkeypatch.setattr(planning, "solve_time_optimal", record)
+    for extra in ([], ["--start", "warm"], ["--start", "cold"]):
+        with pytest.raises(_Stop):
+            main(["plan", "--track", "shortcut", *extra])
+    assert starts == ["cold", "warm", "cold"]

@@ -104,10 +104,12 @@ def _model_options(args: argparse.Namespace):
 
 
 def _plan_kwargs(args: argparse.Namespace) -> dict[str, Any]:
-    """The planner knobs given on the command line (``--spacing``, ``--max-iter``)."""
+    """The planner knobs given on the command line (``--spacing``, ``--start``, ``--max-iter``)."""
     kwargs: dict[str, Any] = {"report": _say}
     if args.spacing is not None:
         kwargs["spacing"] = args.spacing
+    if args.start is not None:
+        kwargs["start"] = args.start
     if args.max_iter is not None:
         from racing_lib.planning import TimeOptimalSettings
 
@@ -484,10 +486,11 @@ def check_arguments(args: argparse.Namespace) -> None:
             f"--spacing must be a node spacing between 0.5 and 20 m, got {spacing} (the "
             "planners are tuned for 3 m)."
         )
-    if getattr(args, "plan", None) and (args.spacing is not None or args.max_iter is not None):
+    knobs = ("spacing", "start", "max_iter")
+    if getattr(args, "plan", None) and any(getattr(args, k, None) is not None for k in knobs):
         raise RacingLibError(
-            "--spacing and --max-iter are planner settings, but --plan drives a plan made before; "
-            "give them to `racing-lib plan`, or drop --plan to plan here."
+            "--spacing, --start and --max-iter are planner settings, but --plan drives a plan "
+            "made before; give them to `racing-lib plan`, or drop --plan to plan here."
         )
     out = getattr(args, "out", None)
     if args.command == "ablation" and getattr(args, "recompute", None) and not out:
@@ -547,6 +550,12 @@ def _add_model_flags(p: argparse.ArgumentParser) -> None:
 def _add_planner_knobs(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--spacing", type=float, help="plan node spacing along the centerline in m (default 3)"
+    )
+    p.add_argument(
+        "--start",
+        choices=("cold", "warm"),
+        help="start of the time-optimal NLP: the centerline at 10 m/s (cold, the default and "
+        "the faster) or the curvature QP's plan (warm, the paper's two-stage planner)",
     )
     p.add_argument(
         "--max-iter",

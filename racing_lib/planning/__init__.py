@@ -32,6 +32,7 @@ from racing_lib.planning.curvature import (
 )
 from racing_lib.planning.speed import SpeedProfile, speed_profile
 from racing_lib.planning.time_optimal import (
+    DEFAULT_START,
     TimeOptimalResult,
     TimeOptimalSettings,
     solve_time_optimal,
@@ -135,7 +136,7 @@ def plan(
     options: Any = None,
     *,
     spacing: float = 3.0,
-    start: str = "warm",
+    start: str = DEFAULT_START,
     grip_margin: float = GRIP_MARGIN,
     curvature_settings: CurvatureSettings | None = None,
     time_optimal_settings: TimeOptimalSettings | None = None,
@@ -149,8 +150,7 @@ def plan(
         The track.
     method : {'centerline', 'curvature', 'time-optimal'}
         ``centerline``: the centerline at its speed profile; ``curvature``: the iterated
-        curvature-optimal QP; ``time-optimal``: the NLP warm-started from the QP (two-stage
-        planner).
+        curvature-optimal QP; ``time-optimal``: the minimum-lap-time NLP.
     params : ModelParams, optional
         Planning model parameters (default: the identified set,
         :func:`racing_lib.model.identified.identified_params`).
@@ -158,8 +158,10 @@ def plan(
         Model effects (default ``ModelOptions()``).
     spacing : float
         Node spacing along the centerline, m (overrides the settings' spacing).
-    start : {'warm', 'cold'}
-        Start of the time-optimal NLP.
+    start : {'cold', 'warm'}
+        Start of the time-optimal NLP: ``'cold'`` (default, :data:`DEFAULT_START`), the
+        centerline at 10 m/s; ``'warm'``, the curvature QP's plan first (the paper's two-stage
+        planner). Both reach the same lap; the cold start is faster, as it skips the QP.
     grip_margin : float
         Share of the friction coefficient the plan leaves unused, in [0, 0.5) (default
         :data:`GRIP_MARGIN`): the planner sees ``mu (1 - grip_margin)``. 0 plans on the model's
@@ -200,8 +202,8 @@ def plan(
             f"spacing must be a node spacing between 0.5 and 20 m, got {spacing!r} (the "
             "planners are tuned for 3 m)."
         )
-    if start not in ("warm", "cold"):
-        raise PlanningError(f"start must be 'warm' or 'cold', got {start!r}.")
+    if start not in ("cold", "warm"):
+        raise PlanningError(f"start must be 'cold' or 'warm', got {start!r}.")
     key = str(method).strip().lower().replace("_", "-")
     if key in ("time-optimal", "timeoptimal", "nlp", "min-time"):
         key = "time-optimal"
@@ -223,7 +225,8 @@ def plan(
         traj = Trajectory.from_centerline(track, params, options=options, spacing=spacing)
         return PlanResult(traj, key, True, "ok", 0, time.perf_counter() - t0)
     cs = dataclasses.replace(curvature_settings or CurvatureSettings(), spacing=spacing)
-    say(f"curvature QP on {track.name} ({track.length / spacing:.0f} nodes) ...")
+    if key == "curvature" or start == "warm":
+        say(f"curvature QP on {track.name} ({track.length / spacing:.0f} nodes) ...")
     if key == "curvature":
         res = solve_curvature(track, params, options, cs)
         return PlanResult(
@@ -250,6 +253,7 @@ def plan(
 
 
 __all__ = [
+    "DEFAULT_START",
     "GRIP_MARGIN",
     "LARGE_PLAN_NODES",
     "METHODS",
