@@ -310,6 +310,27 @@ def test_heuristic_trajectory_and_reference(circle_setup):
     np.testing.assert_allclose(off.heuristic_trajectory(xi0, xi_ref), xi_ref)
 
 
+def test_the_plan_table_interpolates_periodically_and_at_the_seam(circle_setup):
+    """Rows at the nodes are the nodes; s wraps; a round-off below 0 or at the length is row 0."""
+    from racing_lib.control.mpc.base import PlanTable
+
+    plan, _ = circle_setup
+    n = len(plan.s)
+    varied = np.linspace(0.0, 1.0, n)  # a column that changes from node to node
+    table = PlanTable(plan, theta=varied, band_min=-varied, band_max=varied + 1.0)
+    L = table.length
+    rows = table.at_s(np.asarray(plan.s, dtype=float))
+    np.testing.assert_array_equal(rows[:, PlanTable.THETA], varied)
+    np.testing.assert_allclose(table.at_s(np.asarray(plan.s) + 3 * L), rows, atol=1e-9)
+    # Halfway between the last node and the seam: halfway back to row 0.
+    mid = 0.5 * (plan.s[-1] + L)
+    assert table.at_s(np.array([mid]))[0, PlanTable.THETA] == pytest.approx(0.5, abs=1e-12)
+    # -1e-17 mod L is L exactly in floating point: still row 0, never an index past the table.
+    edge = table.at_s(np.array([-1e-17, L, -L]))
+    np.testing.assert_allclose(edge[:, PlanTable.THETA], 0.0, atol=1e-12)
+    np.testing.assert_allclose(edge[:, PlanTable.BMAX], 1.0, atol=1e-12)
+
+
 # --------------------------------------------------------------------------------------------------
 # Controllers in closed loop
 # --------------------------------------------------------------------------------------------------

@@ -326,7 +326,8 @@ class PedalMap:
             u_k, a_k, slope = knee
             u_brake = np.where(excess >= -a_k, u_brake, u_k + (excess + a_k) / slope)
         u_p = np.where(excess >= 0.0, excess / gain, u_brake)
-        u_p = np.clip(u_p, -1.0, 1.0)
+        # np.clip's own wrapper costs more than the rest on the controller's single value.
+        u_p = np.minimum(np.maximum(u_p, -1.0), 1.0)
         return float(u_p[0]) if scalar else u_p
 
 

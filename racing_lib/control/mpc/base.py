@@ -79,9 +79,12 @@ class PlanTable:
     def at_s(self, s: np.ndarray) -> np.ndarray:
         """Interpolated rows at arc lengths ``s`` (m, any real; wrapped), shape (len(s), 10)."""
         sq = np.mod(s, self.length)
-        i = np.clip(np.searchsorted(self.s, sq, side="right") - 1, 0, self.s.size - 2)
-        w = (sq - self.s[i]) / (self.s[i + 1] - self.s[i])
-        return self.table[i] * (1.0 - w)[:, None] + self.table[i + 1] * w[:, None]
+        i = np.searchsorted(self.s, sq, side="right") - 1
+        # In place rather than np.clip, whose Python wrapper costs more than the search on the
+        # MPC's 26 stages. (The upper bound matters: a tiny negative s wraps to exactly length.)
+        np.minimum(np.maximum(i, 0, out=i), self.s.size - 2, out=i)
+        w = ((sq - self.s[i]) / (self.s[i + 1] - self.s[i]))[:, None]
+        return self.table[i] * (1.0 - w) + self.table[i + 1] * w
 
     def time_at(self, s: float) -> float:
         """Plan time at arc length ``s`` within the lap, s."""
@@ -181,6 +184,8 @@ class MPCBase:
         N = self.settings.horizon
         # lambda_k, k = 0..N: 1 -> 0 linearly (paper Eq. for the heuristic trajectory).
         self._lam = 1.0 - np.arange(N + 1) / N
+        # Plan time of stage k after stage 0, s (the settings are frozen, so once is enough).
+        self._stage_times = self.settings.dt * np.arange(N + 1)
         # One batched CasADi call linearizes all N stages.
         if self.settings.discretization == "zoh":
             lin = continuous_linearization(self.params, self.options)
@@ -262,8 +267,7 @@ class MPCBase:
             All interpolated plan columns (curvature, pitch, band) there.
         """
         st = self.settings
-        t0 = self._plan.time_at(s0)
-        times = t0 + st.dt * np.arange(st.horizon + 1)
+        times = self._plan.time_at(s0) + self._stage_times
         s_k = self._plan.s_at_times(times)
         # Stage 0 is the projection itself (interpolating back from time would add round-off).
         s_k = s_k - s_k[0] + s0
@@ -274,7 +278,7 @@ class MPCBase:
         xi_ref[:, X.R] = rows[:, PlanTable.R]
         xi_ref[:, X.EPSI] = rows[:, PlanTable.EPSI]
         xi_ref[:, X.S] = s_k
-        u_ref = np.column_stack([rows[:, PlanTable.DELTA], rows[:, PlanTable.AX]])
+        u_ref = rows[:, [PlanTable.DELTA, PlanTable.AX]]
         return xi_ref, u_ref, rows
 
     def linearize(

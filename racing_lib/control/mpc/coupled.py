@@ -136,12 +136,13 @@ class CoupledMPC(MPCBase):
         theta = rows[:N, PlanTable.THETA]
         # State-dependent a_x limits at the heuristic states, stages 0..N-1.
         a_min, a_max = self.ax_limits(xi_hat[:N])
-        u_min = np.column_stack([np.full(N, -st.steer_max), a_min])
-        u_max = np.column_stack([np.full(N, st.steer_max), a_max])
+        u_min, u_max = np.empty((N, NU)), np.empty((N, NU))
+        u_min[:, U.DELTA], u_min[:, U.AX] = -st.steer_max, a_min
+        u_max[:, U.DELTA], u_max[:, U.AX] = st.steer_max, a_max
         # Linearize only at inputs the QP may choose: after a hard brake (or a fallback) the last
         # a_x can lie far outside this step's bounds, and the tyre slopes there made the
         # prediction unstable enough for OSQP to report the QP infeasible.
-        u_lin = np.clip(u_hat[:N], u_min, u_max)
+        u_lin = np.minimum(np.maximum(u_hat[:N], u_min), u_max)  # np.clip, without its wrapper
         t2 = time.perf_counter()
         A, B, d = self.linearize(xi_hat[:N], u_lin, kappa, theta)
         t3 = time.perf_counter()

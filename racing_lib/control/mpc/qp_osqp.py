@@ -298,9 +298,9 @@ class TrackingQP:
         if data.u_ref is not None:
             qu -= 2.0 * sh.input_weights * np.asarray(data.u_ref, dtype=float)
         q[self._nx_tot : self._nx_tot + N * m] = qu.ravel()
-        if not (np.all(np.isfinite(Ax)) and np.all(np.isfinite(rhs)) and np.all(np.isfinite(q))):
+        if not (np.isfinite(Ax).all() and np.isfinite(rhs).all() and np.isfinite(q).all()):
             return failed_solution(sh, "non-finite problem data")
-        if np.any(self._l > self._u):
+        if (self._l > self._u).any():
             return failed_solution(sh, "inconsistent bounds (lower > upper)")
         tic = time.perf_counter()
         self._solver.update(Ax=Ax, q=q, l=self._l, u=self._u)
@@ -340,7 +340,7 @@ class TrackingQP:
     def _usable(self, status: str, z: np.ndarray | None) -> bool:
         """Whether an OSQP status and solution vector can be used as the control."""
         ok = status == "solved" or (self.settings.accept_inaccurate and status in SOLVED_STATUSES)
-        return ok and z is not None and bool(np.all(np.isfinite(z)))
+        return ok and z is not None and bool(np.isfinite(z).all())
 
     def _rescue(
         self, Ax: np.ndarray, osqp_status: str
