@@ -19,7 +19,7 @@ from pathlib import Path as FilePath
 from typing import Any
 
 from racing_lib.errors import RacingLibError
-from racing_lib.planning import METHODS
+from racing_lib.planning import METHODS, STARTS
 
 DEFAULT_TRACK = "expressway"
 
@@ -553,7 +553,7 @@ def _add_planner_knobs(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--start",
-        choices=("cold", "warm"),
+        choices=STARTS,
         help="start of the time-optimal NLP: the centerline at 10 m/s (cold, the default and "
         "the faster) or the curvature QP's plan (warm, the paper's two-stage planner)",
     )

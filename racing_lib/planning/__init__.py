@@ -33,6 +33,7 @@ from racing_lib.planning.curvature import (
 from racing_lib.planning.speed import SpeedProfile, speed_profile
 from racing_lib.planning.time_optimal import (
     DEFAULT_START,
+    STARTS,
     TimeOptimalResult,
     TimeOptimalSettings,
     solve_time_optimal,
@@ -202,8 +203,8 @@ def plan(
             f"spacing must be a node spacing between 0.5 and 20 m, got {spacing!r} (the "
             "planners are tuned for 3 m)."
         )
-    if start not in ("cold", "warm"):
-        raise PlanningError(f"start must be 'cold' or 'warm', got {start!r}.")
+    if start not in STARTS:
+        raise PlanningError(f"start must be {' or '.join(map(repr, STARTS))}, got {start!r}.")
     key = str(method).strip().lower().replace("_", "-")
     if key in ("time-optimal", "timeoptimal", "nlp", "min-time"):
         key = "time-optimal"
@@ -254,6 +255,7 @@ def plan(
 
 __all__ = [
     "DEFAULT_START",
+    "STARTS",
     "GRIP_MARGIN",
     "LARGE_PLAN_NODES",
     "METHODS",

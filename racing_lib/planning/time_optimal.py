@@ -77,6 +77,7 @@ from racing_lib.planning.trajectory import Trajectory, default_model_inputs
 
 __all__ = [
     "DEFAULT_START",
+    "STARTS",
     "TimeOptimalResult",
     "TimeOptimalSettings",
     "clear_cache",
@@ -113,6 +114,8 @@ STARTING_BARRIER: tuple[tuple[str, Any], ...] = (
 #: the faster plan on all twelve (benchmarks/bench_plan_speed.py). ``start='warm'`` is the paper's
 #: two-stage planner, and the start to try when the NLP is made harder (finer grid, other model).
 DEFAULT_START = "cold"
+#: The starts :func:`solve_time_optimal` and :func:`racing_lib.planning.plan` know.
+STARTS = ("cold", "warm")
 
 
 def _shape_settings(st: TimeOptimalSettings) -> TimeOptimalSettings:
