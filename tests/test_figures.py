@@ -15,6 +15,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
+from matplotlib.patches import FancyArrowPatch  # noqa: E402
 
 from racing_lib.face import plotting, schematics  # noqa: E402
 from racing_lib.tracks import corner_positions, load_track  # noqa: E402
@@ -37,8 +38,12 @@ def test_the_pipeline_diagram_has_every_stage_and_the_loop():
     text = _texts(ax)
     for stage in ("curvature QP", "time-optimal", "coupled MPC", "simulated car", "CMA-ES"):
         assert stage in text, stage
-    for flow in ("warm start", "steer, pedal", "state", "weights", "lap score"):
+    for flow in ("warm\nstart", "optional", "steer, pedal", "state", "weights", "lap score"):
         assert flow in text, flow
+    # The warm start is optional in the library (the NLP starts cold by default): its one arrow
+    # is dashed, every other arrow solid.
+    styles = [p.get_linestyle() for p in ax.patches if isinstance(p, FancyArrowPatch)]
+    assert sum(style != "-" for style in styles) == 1, styles
     plt.close(ax.figure)
 
 

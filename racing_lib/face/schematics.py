@@ -137,9 +137,11 @@ _STAGES: dict[str, tuple[tuple[float, float], str, str]] = {
 def draw_pipeline(ax: Axes | None = None) -> Axes:
     """The planning and control pipeline of the course (the paper's Fig. 3 with Fig. 1's loop).
 
-    Offline: the track and the identified model feed the curvature QP, whose line warm-starts the
-    time-optimal NLP. Online: the coupled MPC tracks the plan and drives the car, whose state it
-    measures every period. CMA-ES tunes the MPC's weights from the scores of whole laps.
+    Offline: the track and the identified model feed the curvature QP, whose line can warm-start
+    the time-optimal NLP (dashed: the paper's order, optional in ``racing_lib``, which starts the
+    NLP cold by default; chapter 04 measures both). Online: the coupled MPC tracks the plan and
+    drives the car, whose state it measures every period. CMA-ES tunes the MPC's weights from the
+    scores of whole laps.
 
     Parameters
     ----------
@@ -158,20 +160,23 @@ def draw_pipeline(ax: Axes | None = None) -> Axes:
                                     facecolor=color, edgecolor="0.3", lw=1.0))  # fmt: skip
         ax.text(x, y, label, ha="center", va="center", fontsize=9)
 
-    def edge(a: str, b: str, text: str = "", dy: float = 0.0, rad: float = 0.0) -> None:
+    def edge(
+        a: str, b: str, text: str = "", dy: float = 0.0, rad: float = 0.0, linestyle: str = "-"
+    ) -> None:
         (xa, ya), (xb, yb) = _STAGES[a][0], _STAGES[b][0]
         sx = w / 2 if xb > xa else (-w / 2 if xb < xa else 0.0)
         sy = h / 2 if yb > ya else (-h / 2 if yb < ya else 0.0)
         start = (xa + (sx if sx else 0.0), ya + dy + (sy if not sx else 0.0))
         end = (xb - (sx if sx else 0.0), yb + dy - (sy if not sx else 0.0))
-        _arrow(ax, start, end, connectionstyle=f"arc3,rad={rad}")
+        _arrow(ax, start, end, connectionstyle=f"arc3,rad={rad}", linestyle=linestyle)
         if text:
             ax.text((start[0] + end[0]) / 2, (start[1] + end[1]) / 2 + 0.12, text, ha="center",
                     va="bottom", fontsize=8, color="0.25")  # fmt: skip
 
     edge("track", "qp", "grid")
     edge("model", "qp")
-    edge("qp", "nlp", "warm start")
+    edge("qp", "nlp", "warm\nstart", linestyle="--")
+    ax.text(4.925, 2.88, "optional", ha="center", va="top", fontsize=8, color="0.25")
     edge("model", "mpc", "same model", dy=-0.25)
     edge("nlp", "mpc", "")
     ax.text(6.35, 2.1, "plan", fontsize=8, color="0.25")
