@@ -160,23 +160,24 @@ def draw_pipeline(ax: Axes | None = None) -> Axes:
                                     facecolor=color, edgecolor="0.3", lw=1.0))  # fmt: skip
         ax.text(x, y, label, ha="center", va="center", fontsize=9)
 
-    def edge(
-        a: str, b: str, text: str = "", dy: float = 0.0, rad: float = 0.0, linestyle: str = "-"
-    ) -> None:
+    def edge(a: str, b: str, text: str = "", dy: float = 0.0, rad: float = 0.0,
+             linestyle: str = "-", below: str = "") -> None:  # fmt: skip
+        """An arrow from box ``a`` to box ``b``, ``text`` above its middle, ``below`` under it."""
         (xa, ya), (xb, yb) = _STAGES[a][0], _STAGES[b][0]
         sx = w / 2 if xb > xa else (-w / 2 if xb < xa else 0.0)
         sy = h / 2 if yb > ya else (-h / 2 if yb < ya else 0.0)
         start = (xa + (sx if sx else 0.0), ya + dy + (sy if not sx else 0.0))
         end = (xb - (sx if sx else 0.0), yb + dy - (sy if not sx else 0.0))
         _arrow(ax, start, end, connectionstyle=f"arc3,rad={rad}", linestyle=linestyle)
+        mid = ((start[0] + end[0]) / 2, (start[1] + end[1]) / 2)
         if text:
-            ax.text((start[0] + end[0]) / 2, (start[1] + end[1]) / 2 + 0.12, text, ha="center",
-                    va="bottom", fontsize=8, color="0.25")  # fmt: skip
+            ax.text(mid[0], mid[1] + 0.12, text, ha="center", va="bottom", fontsize=8, color="0.25")
+        if below:
+            ax.text(mid[0], mid[1] - 0.12, below, ha="center", va="top", fontsize=8, color="0.25")
 
     edge("track", "qp", "grid")
     edge("model", "qp")
-    edge("qp", "nlp", "warm\nstart", linestyle="--")
-    ax.text(4.925, 2.88, "optional", ha="center", va="top", fontsize=8, color="0.25")
+    edge("qp", "nlp", "warm\nstart", linestyle="--", below="optional")
     edge("model", "mpc", "same model", dy=-0.25)
     edge("nlp", "mpc", "")
     ax.text(6.35, 2.1, "plan", fontsize=8, color="0.25")
