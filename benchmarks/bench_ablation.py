@@ -16,10 +16,11 @@ Never run inside the tests: timings depend on the machine and its load.
 
 from __future__ import annotations
 
-import argparse
 import logging
 import tempfile
 import time
+
+from _script import argument_parser, run
 
 from racing_lib.experiments.ablation.rows import default_trials
 from racing_lib.experiments.ablation.runner import run_ablation
@@ -27,7 +28,7 @@ from racing_lib.experiments.ablation.table import format_table
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argument_parser(__doc__)
     parser.add_argument("--rows", help="comma-separated row names (default: all)")
     parser.add_argument("--track", help="only the rows of this track")
     parser.add_argument("--trials", type=int, default=default_trials(), help="trials per row")
@@ -84,4 +85,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run(main)

@@ -22,13 +22,13 @@ tuned set for the time-optimal plan). Never run inside the tests: timings depend
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
+from _script import argument_parser, run
 
 from racing_lib.errors import RacingLibError
 from racing_lib.experiments.pipeline import race
@@ -131,7 +131,7 @@ def _summary(rows: list[dict]) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = argument_parser(__doc__)
     ap.add_argument("tracks_dir", type=Path, help="folder of racetrack-database CSV files")
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     ap.add_argument("--only", nargs="+", default=None, help="circuit names (file stems)")
@@ -163,4 +163,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    run(main)

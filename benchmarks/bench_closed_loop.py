@@ -23,16 +23,17 @@ Usage::
 
 from __future__ import annotations
 
-import argparse
 import multiprocessing as mp
 import statistics
 import time
 import warnings
 
 import numpy as np
+from _script import argument_parser, run
 
 from racing_lib.experiments.configs import config_spec
 from racing_lib.experiments.lap import make_car, make_controller, run_lap
+from racing_lib.geometry import Track
 from racing_lib.tracks import load_track
 
 
@@ -51,9 +52,8 @@ def replay_factor(spec, steer: np.ndarray, pedal: np.ndarray, seed: int) -> floa
     return len(steer) * car.dt / (time.perf_counter() - t0)
 
 
-def bench_track(source: str, repeats: int, seed: int = 0) -> dict[str, float]:
+def bench_track(track: Track, repeats: int, seed: int = 0) -> dict[str, float]:
     """Medians over ``repeats`` laps of one track."""
-    track = load_track(source)
     spec = config_spec("main", track)
     laps, steps_med, steps_p99, cars = [], [], [], []
     period = None
@@ -81,11 +81,12 @@ def bench_track(source: str, repeats: int, seed: int = 0) -> dict[str, float]:
 
 def main() -> None:
     """Command-line entry point."""
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argument_parser(__doc__)
     parser.add_argument("--tracks", nargs="+", default=["expressway"])
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--busy", type=int, default=0, help="spinning processes alongside")
     args = parser.parse_args()
+    tracks = [load_track(source) for source in args.tracks]  # a bad path stops here, at once
     warnings.filterwarnings("ignore")
     spinners = [mp.Process(target=_spin, daemon=True) for _ in range(args.busy)]
     for p in spinners:
@@ -96,10 +97,10 @@ def main() -> None:
             f"{'track':13s} {'lap s':>8s} {'step med':>9s} {'step p99':>9s} {'of period':>9s} "
             f"{'car x':>7s} {'lap x':>7s}"
         )
-        for source in args.tracks:
-            r = bench_track(source, args.repeats)
+        for track in tracks:
+            r = bench_track(track, args.repeats)
             print(
-                f"{load_track(source).name:13s} {r['lap_s']:8.2f} {r['step_med_ms']:7.2f}ms "
+                f"{track.name:13s} {r['lap_s']:8.2f} {r['step_med_ms']:7.2f}ms "
                 f"{r['step_p99_ms']:7.2f}ms {100 * r['step_share']:8.1f}% {r['car_x']:6.0f}x "
                 f"{r['lap_x']:6.0f}x",
                 flush=True,
@@ -110,4 +111,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run(main)

@@ -10,6 +10,7 @@ from __future__ import annotations
 import time
 
 import numpy as np
+from _script import argument_parser, run
 
 from racing_lib.geometry import FrenetTracker
 from racing_lib.tracks import expressway_track, load_track, shortcut_track
@@ -27,6 +28,7 @@ def _median_us(fn, args: list[tuple], repeat: int = 5) -> float:
 
 
 def main() -> None:
+    argument_parser(__doc__).parse_args()
     rng = np.random.default_rng(0)
     for name in ("expressway", "shortcut"):
         expressway_track.cache_clear()
@@ -66,4 +68,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run(main)

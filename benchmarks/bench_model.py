@@ -16,6 +16,7 @@ from collections.abc import Callable
 
 import casadi as ca
 import numpy as np
+from _script import argument_parser, run
 
 from racing_lib.model import NX, Model, X, discrete_linearization, discretize
 
@@ -45,6 +46,7 @@ def _stages(n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, n
 
 
 def main() -> None:
+    argument_parser(__doc__).parse_args()
     rng = np.random.default_rng(0)
     model = Model()
     print(f"casadi {ca.__version__}; model options: {model.options}")
@@ -66,4 +68,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run(main)

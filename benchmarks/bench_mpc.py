@@ -19,11 +19,11 @@ Never run inside the tests: timings depend on the machine and its load.
 
 from __future__ import annotations
 
-import argparse
 import math
 import time
 
 import numpy as np
+from _script import argument_parser, run
 
 from racing_lib.control.mpc import CoupledMPC, DecoupledMPC, MPCSettings
 from racing_lib.control.mpc.qp_cvxpy import CvxpyTrackingQP
@@ -181,7 +181,7 @@ def lap_rows(track, plan, params, seeds, controllers) -> None:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argument_parser(__doc__)
     ap.add_argument("--track", default="expressway")
     ap.add_argument(
         "--plan",
@@ -274,4 +274,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run(main)

@@ -3,14 +3,15 @@
 Prints the median wall time of a whole lap (controller + simulated car + lap runner) on each
 built-in track, and the real-time factor. Aim (issue 2): under 2 s for a lap of about 100 s.
 
-Usage: ``python benchmarks/bench_nominal_lap.py [repeats]``
+Usage: ``python benchmarks/bench_nominal_lap.py [--repeats 5]``
 """
 
 from __future__ import annotations
 
 import statistics
-import sys
 import time
+
+from _script import argument_parser, run
 
 from racing_lib.experiments.lap import (
     LapSpec,
@@ -25,7 +26,10 @@ from racing_lib.tracks import (
 SPEED_SCALE = 0.75  # the moderate reference of chapter 01
 
 
-def main(repeats: int = 5) -> None:
+def main() -> None:
+    parser = argument_parser(__doc__)
+    parser.add_argument("--repeats", type=int, default=5, help="laps per track (seeds 0, 1, ...)")
+    repeats = parser.parse_args().repeats
     print(f"{'track':<12} {'lap [s]':>8} {'wall median [s]':>16} {'min':>7} {'real-time x':>12}")
     for name in builtin_track_names():
         track = load_track(name)
@@ -43,4 +47,4 @@ def main(repeats: int = 5) -> None:
 
 
 if __name__ == "__main__":
-    main(int(sys.argv[1]) if len(sys.argv) > 1 else 5)
+    run(main)

@@ -26,11 +26,12 @@ Usage::
 
 from __future__ import annotations
 
-import argparse
 import statistics
 import time
 import warnings
 from pathlib import Path
+
+from _script import argument_parser, run
 
 from racing_lib.planning import DEFAULT_START, TimeOptimalSettings, plan
 from racing_lib.planning.time_optimal import clear_cache
@@ -82,7 +83,7 @@ def bench_track(track, ways: list[str], repeats: int) -> dict[str, dict]:
 
 def main() -> None:
     """Command-line entry point."""
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argument_parser(__doc__)
     parser.add_argument("tracks_dir", nargs="?", help="folder of racetrack-database CSV files")
     parser.add_argument("--only", nargs="*", help="track names to keep")
     parser.add_argument("--repeats", type=int, default=1)
@@ -139,4 +140,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run(main)

@@ -10,9 +10,10 @@ times on this machine; no assertions.
 
 from __future__ import annotations
 
-import argparse
 import time
 import warnings
+
+from _script import argument_parser, run
 
 from racing_lib.model import ModelOptions, ModelParams
 from racing_lib.planning import (
@@ -77,7 +78,7 @@ def bench_track(name: str, spacing: float, ablations: bool) -> None:
 
 def main() -> None:
     """Command-line entry point."""
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argument_parser(__doc__)
     parser.add_argument("tracks", nargs="*", default=["expressway"])
     parser.add_argument("--spacing", type=float, default=3.0)
     parser.add_argument("--ablations", action="store_true")
@@ -88,4 +89,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run(main)

@@ -1,11 +1,11 @@
-"""Speed of the simulated car (run: ``python benchmarks/bench_sim.py [track]``).
+"""Speed of the simulated car (run: ``python benchmarks/bench_sim.py [TRACK]``).
 
 A lap is first driven once by the nominal controller (pure pursuit + speed PI on a speed profile
 limited by 0.8 g lateral and 0.8 g braking), recording its commands. The timed runs replay those
 commands with the same seed, which reproduces the lap bit for bit, so the timing covers the
 simulator alone (integration, powertrain, Frenet tracking, walls). Prints the median over several
-runs of the CPU seconds per 100 s of simulated driving and the real-time factor. The default
-track is the built-in ``expressway``; without it, a 1.6 km oval is used.
+runs of the CPU seconds per 100 s of simulated driving and the real-time factor. TRACK is a
+built-in track name or a racetrack-database CSV file (default: the built-in ``expressway``).
 
 Times are order-of-magnitude on a shared machine; no assertion is made on them.
 """
@@ -14,38 +14,17 @@ from __future__ import annotations
 
 import math
 import statistics
-import sys
 import time
 
 import numpy as np
+from _script import argument_parser, run
 
-from racing_lib.errors import TrackError
-from racing_lib.geometry import (
-    Path,
-    Track,
-)
+from racing_lib.geometry import Track
 from racing_lib.sim import SimulatedCar
 from racing_lib.tracks import load_track
 
 SEED = 7
 RUNS = 5
-
-
-def _fallback_track() -> Track:
-    """An oval: two 400 m straights joined by 125 m radius half circles, 12 m wide, walled."""
-    pts = []
-    for i in range(80):
-        pts.append((5.0 * i, -125.0))
-    for i in range(80):
-        a = -math.pi / 2 + math.pi * i / 80
-        pts.append((400.0 + 125.0 * math.cos(a), 125.0 * math.sin(a)))
-    for i in range(80):
-        pts.append((400.0 - 5.0 * i, 125.0))
-    for i in range(80):
-        a = math.pi / 2 + math.pi * i / 80
-        pts.append((125.0 * math.cos(a), 125.0 * math.sin(a)))
-    xy = np.array(pts)
-    return Track(Path(xy[:, 0], xy[:, 1]), 6.0, 6.0, boundary="walls", name="oval")
 
 
 def _speed_profile(track: Track, a_lat: float, a_brake: float, v_max: float) -> tuple:
@@ -116,13 +95,10 @@ def replay(car: SimulatedCar, cmds: list[tuple[float, float]]) -> float:
     return time.process_time() - t0
 
 
-def main(argv: list[str]) -> None:
-    name = argv[1] if len(argv) > 1 else "expressway"
-    try:
-        track = load_track(name)
-    except TrackError as exc:
-        print(f"({exc}) -> using a 1.6 km oval instead", file=sys.stderr)
-        track = _fallback_track()
+def main() -> None:
+    parser = argument_parser(__doc__)
+    parser.add_argument("track", nargs="?", default="expressway", help="track name or CSV file")
+    track = load_track(parser.parse_args().track)
     car = SimulatedCar(track, start_speed=20.0)
     duration = 100.0
     cmds = record_commands(car, duration)
@@ -140,4 +116,4 @@ def main(argv: list[str]) -> None:
 
 
 if __name__ == "__main__":
-    main(sys.argv)
+    run(main)

@@ -6,7 +6,7 @@ identified model's speed profile with some grip in reserve. The process pool is 
 first generation ("cold") includes starting the workers and building the MPC's CasADi functions
 in each; the median is over the warm repeats.
 
-Usage: ``python benchmarks/bench_tuning.py [repeats] [popsize]``
+Usage: ``python benchmarks/bench_tuning.py [--repeats 3] [--popsize 9]``
 """
 
 from __future__ import annotations
@@ -14,9 +14,10 @@ from __future__ import annotations
 import functools
 import logging
 import statistics
-import sys
 import time
 from concurrent.futures import Executor, ProcessPoolExecutor
+
+from _script import argument_parser, run
 
 from racing_lib.experiments.lap import LapSpec
 from racing_lib.experiments.tuning import (
@@ -51,7 +52,12 @@ def one_generation(tuner: CmaTuner, executor: Executor | None) -> float:
     return time.perf_counter() - tic
 
 
-def main(repeats: int = 3, popsize: int = 9) -> None:
+def main() -> None:
+    parser = argument_parser(__doc__)
+    parser.add_argument("--repeats", type=int, default=3, help="timed generations per executor")
+    parser.add_argument("--popsize", type=int, default=9, help="candidates per generation")
+    args = parser.parse_args()
+    repeats, popsize = args.repeats, args.popsize
     logging.disable(logging.WARNING)  # MPC fallbacks of bad candidates are expected here
     spec = stadium_spec()
     evaluate = functools.partial(evaluate_weights, spec, seeds=(0,))
@@ -73,5 +79,4 @@ def main(repeats: int = 3, popsize: int = 9) -> None:
 
 
 if __name__ == "__main__":
-    args = [int(a) for a in sys.argv[1:3]]
-    main(*args)
+    run(main)

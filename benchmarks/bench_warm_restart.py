@@ -26,7 +26,6 @@ Usage::
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import statistics
 import time
@@ -35,6 +34,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from _script import argument_parser, run
 
 from racing_lib.planning import GRIP_MARGIN
 from racing_lib.planning.curvature import TrackGrid
@@ -136,7 +136,7 @@ def bench_track(track: Any, params: Any, options: Any) -> dict[str, dict]:
 
 def main() -> None:
     """Command-line entry point."""
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argument_parser(__doc__)
     parser.add_argument("tracks_dir", nargs="?", help="folder of racetrack-database CSV files")
     parser.add_argument("--only", nargs="*", help="track names to keep")
     args = parser.parse_args()
@@ -177,4 +177,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run(main)

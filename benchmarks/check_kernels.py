@@ -32,6 +32,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+from _script import argument_parser, run
+
 KERNELS = {"default": None, "Sandybridge": "Sandybridge"}
 LAP_TIME_TOLERANCE = 0.003  # relative
 
@@ -96,7 +98,7 @@ def _agree(a: dict, b: dict) -> tuple[bool, str]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = argument_parser(__doc__)
     ap.add_argument("--tracks", type=Path, default=None, help="folder of racetrack-database CSVs")
     ap.add_argument("--circuits", nargs="*", default=["Spielberg", "Sepang", "Montreal"])
     ap.add_argument("--seeds", type=int, nargs="+", default=[0])
@@ -134,4 +136,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    run(main)
