@@ -21,6 +21,7 @@ import shlex
 import stat
 import subprocess
 import tempfile
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -30,8 +31,10 @@ log = logging.getLogger(__name__)
 
 #: Compiled builds kept in the cache folder (the least recently used beyond this are removed).
 MAX_BUILDS = 8
-#: Flags of the C compiler (-O1: as fast as -O3 for this code, and compiles in a third of the time).
-CFLAGS = ("-O1", "-fPIC", "-shared")
+#: Flags of the C compiler (-O1: as fast as -O3 for this code, and compiles in a third of the time;
+#: -ffp-contract=off: no fused multiply-adds, which some processors' compilers would otherwise emit,
+#: so compiled code computes what CasADi's interpreter computes, to the last bit).
+CFLAGS = ("-O1", "-ffp-contract=off", "-fPIC", "-shared")
 
 
 def compile_function(fn: Any) -> Any | None:
@@ -47,11 +50,34 @@ def compile_function(fn: Any) -> Any | None:
     casadi.Function or None
         The compiled function (``casadi.external``), or None with a logged reason.
     """
+    compiled = compile_functions([fn])
+    return None if compiled is None else compiled[0]
+
+
+def compile_functions(fns: Sequence[Any], name: str | None = None) -> list[Any] | None:
+    """Several functions compiled into one shared library (one compiler run), or None.
+
+    Parameters
+    ----------
+    fns : sequence of casadi.Function
+        The functions, with distinct names; each result has its function's name, inputs and
+        outputs.
+    name : str, optional
+        The library's name in the cache folder (default: the first function's name). Builds are
+        pruned by this name, so give each group its own.
+
+    Returns
+    -------
+    list of casadi.Function or None
+        The compiled functions (``casadi.external``) in the order given, or None with a logged
+        reason when no C compiler works or a build cannot be loaded.
+    """
     import casadi as ca
 
-    name = fn.name()
+    name = name or fns[0].name()
     gen = ca.CodeGenerator(f"{name}.c", {"with_header": False})
-    gen.add(fn)
+    for fn in fns:
+        gen.add(fn)
     code = gen.dump()
     compiler = os.environ.get("CC", "cc")
     key = hashlib.sha256(
@@ -64,7 +90,7 @@ def compile_function(fn: Any) -> Any | None:
             if not library.exists():
                 _build(code, library, compiler)
             os.utime(library)  # most recently used: kept by the pruning below
-            loaded = ca.external(name, str(library))
+            loaded = [ca.external(fn.name(), str(library)) for fn in fns]
         except FileNotFoundError:
             continue
         except (OSError, RuntimeError, subprocess.CalledProcessError) as exc:
@@ -75,6 +101,37 @@ def compile_function(fn: Any) -> Any | None:
         _prune(folder, name, keep=library)
         return loaded
     return None
+
+
+def compiled_or_interpreted(fns: Sequence[Any], what: str, switch: str) -> list[Any]:
+    """``fns`` compiled together, or ``fns`` themselves with one warning when that fails.
+
+    Parameters
+    ----------
+    fns : sequence of casadi.Function
+        The functions (see :func:`compile_functions`).
+    what : str
+        What they compute, for the warning and the build's name: ``"the MPC linearization"``.
+    switch : str
+        The setting that turns compilation off, named in the warning:
+        ``"MPCSettings(jit=False)"``.
+
+    Returns
+    -------
+    list of casadi.Function
+        Compiled where a C compiler works; otherwise the same functions, evaluated by CasADi's
+        interpreter (the same numbers, several times slower).
+    """
+    compiled = compile_functions(fns)
+    if compiled is not None:
+        return compiled
+    log.warning(
+        "compiling %s failed; using CasADi's interpreter (slower). Install a C compiler (cc) or "
+        "pass %s.",
+        what,
+        switch,
+    )
+    return list(fns)
 
 
 def _build(code: str, library: Path, compiler: str) -> None:

@@ -146,6 +146,27 @@ def test_ipopt_failure_names_the_solver_and_status(oval):
     assert failed.status == "Maximum_Iterations_Exceeded"
 
 
+def test_an_unknown_ipopt_option_is_named_not_blamed_on_the_start(oval):
+    settings = TimeOptimalSettings(spacing=2.5, ipopt_options=(("linear_solver", "ma27"),))
+    with pytest.raises(PlanningError, match="Invalid_Option") as err:
+        solve_time_optimal(oval, PARAMS, OPTIONS, settings, start="cold")
+    msg = str(err.value)
+    assert "ipopt_options" in msg and "'ma27'" in msg
+    assert "warm start" not in msg and "spacing" not in msg  # neither would help
+
+
+def test_compiled_and_interpreted_derivatives_give_the_same_plan_to_the_bit(oval):
+    compiled = solve_time_optimal(oval, PARAMS, OPTIONS, SETTINGS, start="cold")
+    plain = TimeOptimalSettings(spacing=2.5, jit=False)
+    interpreted = solve_time_optimal(oval, PARAMS, OPTIONS, plain, start="cold")
+    assert compiled.iterations == interpreted.iterations
+    for key, value in compiled.solution.items():
+        np.testing.assert_array_equal(value, interpreted.solution[key], err_msg=key)
+    # Where the solve's time went: evaluations are a part of it, IPOPT's own work the rest.
+    for res in (compiled, interpreted):
+        assert 0.0 < res.evaluation_time < res.solve_time
+
+
 def test_friction_too_low_is_refused_before_solving(oval):
     with pytest.raises(PlanningError, match="friction too low"):
         solve_time_optimal(oval, ModelParams(mu=0.05), OPTIONS, SETTINGS, start="cold")

@@ -80,3 +80,43 @@ def test_interval_functions_are_built_once_per_parameter_set():
     assert interval_functions(ModelParams(), ModelOptions(), other) is interval_functions(
         ModelParams(), ModelOptions(), st
     )
+
+
+@pytest.mark.parametrize("name", ["con_jac", "obj_grad", "hess"])
+def test_the_compiled_derivatives_are_the_interpreted_ones_to_the_bit(name):
+    from racing_lib import jit
+
+    st = TimeOptimalSettings()
+    compiled = interval_functions(ModelParams(), ModelOptions(), _shape_settings(st))
+    interpreted = interval_functions(
+        ModelParams(), ModelOptions(), _shape_settings(TimeOptimalSettings(jit=False))
+    )
+    fn, ref = getattr(compiled, name), getattr(interpreted, name)
+    if jit.compile_function(ref) is None:
+        pytest.skip("no C compiler on this machine: the planner interprets (tested below)")
+    assert fn.class_name() == "External" and ref.class_name() == "SXFunction"
+    rng = np.random.default_rng(5)
+    for _ in range(5):
+        args = [
+            rng.uniform(0.5, 1.5, 7),  # scaled variables of node a and node b
+            rng.uniform(0.5, 1.5, 7),
+            [0.02 * rng.normal(), 0.01 * rng.normal(), 100.0],  # kappa, theta, s
+            [0.02 * rng.normal(), 0.01 * rng.normal(), 103.0],
+            3.0,
+        ]
+        if name == "hess":
+            args += [0.7, rng.normal(0.0, 1.0, compiled.n_con)]
+        np.testing.assert_array_equal(np.asarray(fn(*args)), np.asarray(ref(*args)))
+
+
+def test_without_a_compiler_the_nlp_is_interpreted_with_one_warning(monkeypatch, caplog):
+    from racing_lib import jit
+
+    monkeypatch.setattr(jit, "compile_functions", lambda fns, name=None: None)
+    params = ModelParams(mu=1.05)  # a parameter set no other test compiled (lru_cache)
+    with caplog.at_level("WARNING"):
+        fns = interval_functions(params, ModelOptions(), _shape_settings(TimeOptimalSettings()))
+    assert fns.hess.class_name() == "SXFunction"
+    warnings = [r for r in caplog.records if r.levelname == "WARNING"]
+    assert len(warnings) == 1
+    assert "TimeOptimalSettings(jit=False)" in warnings[0].getMessage()

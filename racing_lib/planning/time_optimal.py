@@ -42,9 +42,9 @@ Formulation choices, each measured on real circuits before it was adopted:
   took 25 IPOPT iterations; "iterate" took 3-4 solves of 40-75 iterations each, because every
   re-solve restarts IPOPT's barrier.
 
-The NLP is assembled from the functions of one interval, differentiated once per parameter set
-(:mod:`racing_lib.planning.time_optimal_nlp`), so building it for a new track takes a tenth of a
-second; built problems are also kept in a small cache.
+The NLP is assembled from the functions of one interval, differentiated and compiled once per
+parameter set (:mod:`racing_lib.planning.time_optimal_nlp`), so building it for a new track takes
+a tenth of a second; built problems are also kept in a small cache.
 """
 
 from __future__ import annotations
@@ -125,7 +125,7 @@ def _shape_settings(st: TimeOptimalSettings) -> TimeOptimalSettings:
     grid or bounds share one cached set of interval functions.
     """
     shaping = ("w_ddelta", "slip_limit", "slip_force_share", "friction_ellipse")
-    shaping += ("drive_axle_circle", "pedal_limits")
+    shaping += ("drive_axle_circle", "pedal_limits", "jit")
     return TimeOptimalSettings(**{name: getattr(st, name) for name in shaping})
 
 
@@ -242,8 +242,15 @@ def _initial_guess(
     return z, kind
 
 
-def _failure_advice(kind: str, st: TimeOptimalSettings) -> str:
+def _failure_advice(kind: str, st: TimeOptimalSettings, status: str) -> str:
     """What to try after a failed NLP: only knobs that exist, with their command-line flags."""
+    if status == "Invalid_Option":
+        # Nothing was solved: another start or grid would fail the same way.
+        return (
+            f"check TimeOptimalSettings.ipopt_options, now {st.ipopt_options!r}: IPOPT rejected "
+            "one of them (an unknown name, a value out of range, or a linear solver this build "
+            "lacks; print_level=5 in the settings shows which)"
+        )
     tips = []
     if kind == "warm":
         tips.append("the cold start (start='cold'; on the command line --start cold)")
@@ -417,6 +424,7 @@ def solve_time_optimal(
     success = False
     z = z0
     solve_time = 0.0
+    evaluation_time = 0.0
     outer = 0
     settled = False
     for outer in range(1, max(1, st.max_outer) + 1):  # noqa: B007 - reported
@@ -426,6 +434,7 @@ def solve_time_optimal(
         sol = prob.solver(x0=x0, lbx=lbx, ubx=ubx, lbg=prob.lbg, ubg=prob.ubg)
         solve_time += time.perf_counter() - t0
         stats = prob.solver.stats()
+        evaluation_time += sum(v for k, v in stats.items() if k.startswith("t_wall_nlp_"))
         status = str(stats.get("return_status", "unknown"))
         iters.append(int(stats.get("iter_count", -1)))
         success = status in ("Solve_Succeeded", "Solved_To_Acceptable_Level")
@@ -456,7 +465,7 @@ def solve_time_optimal(
         raise PlanningError(
             f"time-optimal NLP on track {getattr(track, 'name', '?')!r}: IPOPT returned "
             f"'{status}' after {sum(iters)} iterations ({kind} start). Try: "
-            f"{_failure_advice(kind, st)}."
+            f"{_failure_advice(kind, st, status)}."
         )
     traj = None
     lap_time = float("nan")
@@ -488,6 +497,7 @@ def solve_time_optimal(
         iterations_per_solve=iters,
         grid=grid,
         solution=solution,
+        evaluation_time=evaluation_time,
     )
 
 

@@ -13,7 +13,13 @@ small blocks:
 * a grid of N nodes maps them over its N intervals (``Function.map``) and scatters the blocks into
   the global sparse Jacobian and upper-triangular Hessian with constant index maps
   (:class:`StructuredNLP`), which IPOPT receives as CasADi's ``jac_g``, ``grad_f`` and
-  ``hess_lag``.
+  ``hess_lag``;
+* the three derivative functions are compiled to machine code (:mod:`racing_lib.jit`; about a
+  second once per parameter set, then cached on disk). CasADi's interpreter spent 58 % of the
+  solve evaluating them, the Hessian most (40 ms a call on the expressway's 1,464 nodes);
+  compiled, the evaluations take about a fifth of the solve and the rest is IPOPT's own linear
+  algebra, so the solve takes about half the time, to the same plan bit for bit
+  (``benchmarks/bench_plan_speed.py``).
 
 Why not let CasADi differentiate the whole lap: with one flat SX graph of 1,464 nodes its symbolic
 Hessian took 6.3 s to build (expressway), more than the solve, and had to be rebuilt for every
@@ -33,6 +39,7 @@ from typing import Any
 import numpy as np
 
 from racing_lib.errors import PlanningError
+from racing_lib.jit import compiled_or_interpreted
 
 __all__ = ["IntervalFunctions", "StructuredNLP", "interval_functions", "NLP_VARS", "NLP_SCALE"]
 
@@ -201,12 +208,24 @@ def interval_functions(params: Any, options: Any, st: Any) -> IntervalFunctions:
     jac = ca.jacobian(con, v)
     sigma, lam = ca.SX.sym("sigma"), ca.SX.sym("lam", con.numel())
     hess = ca.hessian(sigma * obj + ca.dot(lam, con), v)[0]
+    derivatives = [
+        ca.Function("interval_con_jac", args, [jac.nz[:]]),
+        ca.Function("interval_obj_grad", args, [ca.gradient(obj, v)]),
+        ca.Function("interval_hess", [*args, sigma, lam], [hess.nz[:]]),
+    ]
+    if st.jit:
+        # The derivatives are evaluated at every IPOPT iteration; compiled, they cost a fifth
+        # of what CasADi's interpreter takes (the same numbers to the last bit).
+        derivatives = compiled_or_interpreted(
+            derivatives, "the time-optimal NLP's derivatives", "TimeOptimalSettings(jit=False)"
+        )
+    con_jac, obj_grad, hess_fn = derivatives
     return IntervalFunctions(
         con=ca.Function("interval_con", args, [con]),
-        con_jac=ca.Function("interval_con_jac", args, [jac.nz[:]]),
+        con_jac=con_jac,
         obj=ca.Function("interval_obj", args, [obj]),
-        obj_grad=ca.Function("interval_obj_grad", args, [ca.gradient(obj, v)]),
-        hess=ca.Function("interval_hess", [*args, sigma, lam], [hess.nz[:]]),
+        obj_grad=obj_grad,
+        hess=hess_fn,
         inv_sdot=ca.Function("inv_sdot", [wa, da], [q_a]),
         jac_sparsity=jac.sparsity(),
         hess_sparsity=hess.sparsity(),

@@ -7,16 +7,13 @@ appended as a state.
 from __future__ import annotations
 
 import functools
-import logging
 import math
 from typing import Any
 
 import numpy as np
 
-from racing_lib.jit import compile_function
+from racing_lib.jit import compiled_or_interpreted
 from racing_lib.model import NU, NX
-
-log = logging.getLogger(__name__)
 
 __all__ = [
     "augment_steering_lag",
@@ -58,13 +55,7 @@ def substep_linearization(
     d = x - ca.mtimes(A, xi) - ca.mtimes(B, u)
     fn = ca.Function("racing_lib_mpc_lin", [xi, u, kappa, theta], [A, B, d])
     if jit:
-        compiled = compile_function(fn)
-        if compiled is not None:
-            return compiled
-        log.warning(
-            "compiling the MPC linearization failed; using CasADi's interpreter (slower). "
-            "Install a C compiler (cc) or pass MPCSettings(jit=False)."
-        )
+        (fn,) = compiled_or_interpreted([fn], "the MPC linearization", "MPCSettings(jit=False)")
     return fn
 
 
