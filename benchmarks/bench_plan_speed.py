@@ -9,13 +9,19 @@ and solve, nothing cached from an earlier track) in three ways:
 * ``warm``: the structured NLP with :data:`~racing_lib.planning.time_optimal.STARTING_BARRIER`,
   warm-started from the QP (the paper's two stages);
 * ``cold``: the same NLP from the centerline at 10 m/s, which is ``plan``'s default
-  (:data:`~racing_lib.planning.DEFAULT_START`), chosen because it was the faster of the two.
+  (:data:`~racing_lib.planning.DEFAULT_START`), chosen because it was the faster of the two;
+* ``interpreted``: the cold start with the derivatives evaluated by CasADi's interpreter
+  (``TimeOptimalSettings(jit=False)``), as the planner ran before they were compiled.
 
 Per track it prints IPOPT iterations, the build time, the wall time of the whole call (median
-over ``--repeats``) and the planned lap time of each; then the medians over tracks of the ratios
-that matter: warm/cold iterations and wall time, previous/new (new: the default) wall time and
-iterations, and the largest lap-time difference between the three. Times are this machine's;
-never run inside the tests.
+over ``--repeats``), the share of the solve spent evaluating functions (``eval``) and the planned
+lap time of each; then the medians over tracks of the ratios
+that matter: warm/cold iterations and wall time, interpreted/compiled solve and wall time and the
+share of the solve spent in function evaluations (the rest is IPOPT's own linear algebra),
+seconds per km, previous/new (new: the default) wall time and iterations, and the largest
+lap-time difference between the ways. The first plan of a parameter set on a machine compiles
+its derivatives (about a second, then cached on disk): run once before timing, or read the build
+column. Times are this machine's; never run inside the tests.
 
 Usage::
 
@@ -46,6 +52,7 @@ WAYS = {
     "previous": (PREVIOUS, "warm"),
     "warm": (TimeOptimalSettings(), "warm"),
     "cold": (TimeOptimalSettings(), "cold"),
+    "interpreted": (TimeOptimalSettings(jit=False), "cold"),
 }
 
 
@@ -61,6 +68,7 @@ def run_once(track, settings: TimeOptimalSettings, start: str) -> dict:
         "iterations": int(res.iterations),
         "build_s": float(nlp.build_time),
         "solve_s": float(nlp.solve_time),
+        "eval_s": float(nlp.evaluation_time),
         "wall_s": wall,
         "lap_s": float(nlp.lap_time),
         "status": res.status,
@@ -77,6 +85,7 @@ def bench_track(track, ways: list[str], repeats: int) -> dict[str, dict]:
         row["wall_s"] = statistics.median(r["wall_s"] for r in runs)
         row["solve_s"] = statistics.median(r["solve_s"] for r in runs)
         row["build_s"] = statistics.median(r["build_s"] for r in runs)
+        row["eval_s"] = statistics.median(r["eval_s"] for r in runs)
         out[way] = row
     return out
 
@@ -96,20 +105,24 @@ def main() -> None:
     ways = [w for w in WAYS if not (args.skip_previous and w == "previous")]
     header = f"{'track':13s} {'km':>5s}"
     for way in ways:
-        header += f" | {way + ' it':>12s} {'build':>6s} {'wall':>6s} {'lap':>8s}"
+        header += f" | {way + ' it':>14s} {'build':>5s} {'wall':>5s} {'eval':>4s} {'lap':>8s}"
     print(header)
     rows = {}
+    track_km = {}
     for src in sources:
         track = load_track(src)
         if args.only and track.name not in args.only:
             continue
         row = bench_track(track, ways, args.repeats)
         rows[track.name] = row
+        track_km[track.name] = track.length / 1000
         line = f"{track.name:13s} {track.length / 1000:5.2f}"
         for way in ways:
             r = row[way]
+            share = r["eval_s"] / r["solve_s"]
             line += (
-                f" | {r['iterations']:12d} {r['build_s']:6.2f} {r['wall_s']:6.1f} {r['lap_s']:8.3f}"
+                f" | {r['iterations']:14d} {r['build_s']:5.2f} {r['wall_s']:5.1f} {share:4.0%}"
+                f" {r['lap_s']:8.3f}"
             )
         print(line, flush=True)
     if not rows:
@@ -127,6 +140,23 @@ def main() -> None:
     print(
         f"median warm/cold: iterations {its:.2f}, wall {wall:.2f}; "
         f"warm faster on {faster or 'none'}"
+    )
+    if "interpreted" in ways:
+        solve = med(r["interpreted"]["solve_s"] / r["cold"]["solve_s"] for r in rows.values())
+        wall = med(r["interpreted"]["wall_s"] / r["cold"]["wall_s"] for r in rows.values())
+        share = {w: med(r[w]["eval_s"] / r[w]["solve_s"] for r in rows.values()) for w in ways}
+        print(
+            f"median interpreted/compiled: solve {solve:.2f}x, wall {wall:.2f}x; share of the "
+            f"solve in evaluations: interpreted {share['interpreted']:.0%}, compiled "
+            f"{share['cold']:.0%}"
+        )
+    km = {name: track_km[name] for name in rows}
+    per_km = {w: med(r[w]["wall_s"] / km[name] for name, r in rows.items()) for w in ways}
+    its_km = med(r[new]["iterations"] / km[name] for name, r in rows.items())
+    print(
+        "median wall s per km: "
+        + ", ".join(f"{w} {v:.2f}" for w, v in per_km.items())
+        + f"; default iterations per km {its_km:.1f}"
     )
     if "previous" in ways:
         wall = med(r["previous"]["wall_s"] / r[new]["wall_s"] for r in rows.values())
