@@ -4,7 +4,9 @@ CasADi's own ``jit`` option compiles a Function afresh in every process (1-4 s e
 process, notebook kernel and tuning worker paid it) under a new temporary name, so its folder
 grew with every run. Here the C code CasADi generates is hashed; the shared library is built once
 under that hash, kept in one folder per user, and loaded by every later process. The folder
-keeps the :data:`MAX_BUILDS` most recently used builds and removes older ones.
+keeps the :data:`MAX_BUILDS` most recently used builds of each name and removes older ones.
+Without a C compiler (or on Windows) the callers fall back to CasADi's interpreter: the same
+numbers, several times slower.
 
 :class:`BufferedFunction` calls a Function (compiled or not) on numpy arrays it owns: a plain
 call converts every input to a CasADi matrix and every output back, which cost more than the
@@ -17,9 +19,12 @@ import functools
 import hashlib
 import logging
 import os
+import re
 import shlex
+import shutil
 import stat
 import subprocess
+import sys
 import tempfile
 from collections.abc import Sequence
 from pathlib import Path
@@ -29,11 +34,13 @@ import numpy as np
 
 log = logging.getLogger(__name__)
 
-#: Compiled builds kept in the cache folder (the least recently used beyond this are removed).
-MAX_BUILDS = 8
+#: Compiled builds kept in the cache folder for each name (one per parameter set and options; the
+#: least recently used beyond this are removed).
+MAX_BUILDS = 16
 #: Flags of the C compiler (-O1: as fast as -O3 for this code, and compiles in a third of the time;
 #: -ffp-contract=off: no fused multiply-adds, which some processors' compilers would otherwise emit,
-#: so compiled code computes what CasADi's interpreter computes, to the last bit).
+#: so compiled code computes what CasADi's interpreter computes, to the last bit, with any
+#: compiler that does not default to fast math, as gcc and clang do not).
 CFLAGS = ("-O1", "-ffp-contract=off", "-fPIC", "-shared")
 
 
@@ -63,8 +70,8 @@ def compile_functions(fns: Sequence[Any], name: str | None = None) -> list[Any] 
         The functions, with distinct names; each result has its function's name, inputs and
         outputs.
     name : str, optional
-        The library's name in the cache folder (default: the first function's name). Builds are
-        pruned by this name, so give each group its own.
+        The library's name in the cache folder (default: the first function's name). The cache
+        keeps :data:`MAX_BUILDS` builds of each name, so give each group a name of its own.
 
     Returns
     -------
@@ -72,14 +79,62 @@ def compile_functions(fns: Sequence[Any], name: str | None = None) -> list[Any] 
         The compiled functions (``casadi.external``) in the order given, or None with a logged
         reason when no C compiler works or a build cannot be loaded.
     """
+    loaded, reason = _compile(fns, name or fns[0].name())
+    if loaded is None:
+        log.warning("compiling %s failed: %s", name or fns[0].name(), reason)
+    return loaded
+
+
+def compiled_or_interpreted(
+    fns: Sequence[Any], what: str, switch: str, name: str | None = None
+) -> list[Any]:
+    """``fns`` compiled together, or ``fns`` themselves with one warning when that fails.
+
+    Parameters
+    ----------
+    fns : sequence of casadi.Function
+        The functions (see :func:`compile_functions`).
+    what : str
+        What they compute, for the warning: ``"the MPC linearization"``.
+    switch : str
+        The setting that turns compilation off, named in the warning:
+        ``"MPCSettings(jit=False)"``.
+    name : str, optional
+        The build's name in the cache folder (default: the first function's name).
+
+    Returns
+    -------
+    list of casadi.Function
+        Compiled where a C compiler works; otherwise the same functions, evaluated by CasADi's
+        interpreter (the same numbers, several times slower).
+    """
+    loaded, reason = _compile(fns, name or fns[0].name())
+    if loaded is not None:
+        return loaded
+    log.warning(
+        "compiling %s failed (%s); using CasADi's interpreter instead (the same numbers, several "
+        "times slower). Install a C compiler (cc, or name one in CC), or pass %s.",
+        what,
+        reason,
+        switch,
+    )
+    return list(fns)
+
+
+def _compile(fns: Sequence[Any], name: str) -> tuple[list[Any] | None, str]:
+    """The compiled functions and ``""``, or None and the reason they could not be had."""
     import casadi as ca
 
-    name = name or fns[0].name()
+    if os.name != "posix":
+        return None, f"builds are made with a POSIX C compiler, and this is {sys.platform}"
+    compiler = os.environ.get("CC", "cc")
+    command = shlex.split(compiler)
+    if not command or shutil.which(command[0]) is None:
+        return None, f"no C compiler {compiler!r} on the PATH"
     gen = ca.CodeGenerator(f"{name}.c", {"with_header": False})
     for fn in fns:
         gen.add(fn)
     code = gen.dump()
-    compiler = os.environ.get("CC", "cc")
     key = hashlib.sha256(
         "\n".join([code, " ".join(CFLAGS), compiler, ca.__version__]).encode("utf-8")
     ).hexdigest()[:16]
@@ -94,44 +149,13 @@ def compile_functions(fns: Sequence[Any], name: str | None = None) -> list[Any] 
         except FileNotFoundError:
             continue
         except (OSError, RuntimeError, subprocess.CalledProcessError) as exc:
-            # No compiler, a folder mounted noexec, a damaged build: the caller falls back.
+            # A folder mounted noexec, a compiler that fails, a damaged build: the caller falls
+            # back to the interpreter.
             detail = getattr(exc, "stderr", "") or str(exc)
-            log.warning("compiling %s with %s failed: %s", name, compiler, detail.strip()[:300])
-            return None
+            return None, f"{compiler}: {detail.strip()[:300]}"
         _prune(folder, name, keep=library)
-        return loaded
-    return None
-
-
-def compiled_or_interpreted(fns: Sequence[Any], what: str, switch: str) -> list[Any]:
-    """``fns`` compiled together, or ``fns`` themselves with one warning when that fails.
-
-    Parameters
-    ----------
-    fns : sequence of casadi.Function
-        The functions (see :func:`compile_functions`).
-    what : str
-        What they compute, for the warning and the build's name: ``"the MPC linearization"``.
-    switch : str
-        The setting that turns compilation off, named in the warning:
-        ``"MPCSettings(jit=False)"``.
-
-    Returns
-    -------
-    list of casadi.Function
-        Compiled where a C compiler works; otherwise the same functions, evaluated by CasADi's
-        interpreter (the same numbers, several times slower).
-    """
-    compiled = compile_functions(fns)
-    if compiled is not None:
-        return compiled
-    log.warning(
-        "compiling %s failed; using CasADi's interpreter (slower). Install a C compiler (cc) or "
-        "pass %s.",
-        what,
-        switch,
-    )
-    return list(fns)
+        return loaded, ""
+    return None, f"{library.name} was removed by another process while it was loaded"
 
 
 def _build(code: str, library: Path, compiler: str) -> None:
@@ -158,6 +182,8 @@ def _build(code: str, library: Path, compiler: str) -> None:
 def _prune(folder: Path, name: str, keep: Path) -> None:
     """Remove the builds of ``name`` beyond :data:`MAX_BUILDS`, least recently used first.
 
+    A build of ``name`` is ``<name>_<16 hex digits>.so``, so ``a`` never prunes ``a_b``'s builds.
+
     Builds in progress (``.build_*``) are never touched. A process that has a removed build
     loaded keeps using it: on POSIX a removed file stays mapped.
     """
@@ -168,7 +194,9 @@ def _prune(folder: Path, name: str, keep: Path) -> None:
         except OSError:
             return -1.0  # removed meanwhile by another process
 
-    builds = sorted(folder.glob(f"{name}_*.so"), key=used, reverse=True)
+    pattern = re.compile(rf"{re.escape(name)}_[0-9a-f]{{16}}\.so")  # not another name's builds
+    mine = [path for path in folder.glob(f"{name}_*.so") if pattern.fullmatch(path.name)]
+    builds = sorted(mine, key=used, reverse=True)
     for old in builds[MAX_BUILDS:]:
         if old != keep:
             try:

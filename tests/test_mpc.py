@@ -584,15 +584,20 @@ def test_one_build_is_shared_by_processes_and_the_cache_stays_small(tmp_path):
 def test_the_build_cache_keeps_only_the_newest_builds(tmp_path, monkeypatch):
     from racing_lib import jit
 
-    for k in range(jit.MAX_BUILDS + 3):
-        f = tmp_path / f"old_{k}.so"
-        f.write_bytes(b"")
-        os.utime(f, (1000 + k, 1000 + k))
-    keep = tmp_path / "old_0.so"
-    jit._prune(tmp_path, "old", keep=keep)
+    def build(name: str, k: int) -> str:
+        path = tmp_path / f"{name}_{k:016x}.so"  # a build: the name, a 16-digit hash
+        path.write_bytes(b"")
+        os.utime(path, (1000 + k, 1000 + k))
+        return path.name
+
+    olds = [build("old", k) for k in range(jit.MAX_BUILDS + 3)]
+    other = build("old_other", 0)  # another name that starts like it, and older than all
+    jit._prune(tmp_path, "old", keep=tmp_path / olds[0])
     left = sorted(p.name for p in tmp_path.iterdir())
-    assert len(left) == jit.MAX_BUILDS + 1 and "old_0.so" in left  # the one in use stays
-    assert f"old_{jit.MAX_BUILDS + 2}.so" in left and "old_1.so" not in left
+    assert olds[0] in left  # the one in use stays
+    assert olds[-1] in left and olds[1] not in left
+    assert len([name for name in left if name in olds]) == jit.MAX_BUILDS + 1
+    assert other in left  # not one of "old"'s builds
 
 
 def test_a_damaged_build_falls_back_to_the_interpreter(tmp_path, monkeypatch, caplog):
@@ -617,6 +622,23 @@ def test_a_damaged_build_falls_back_to_the_interpreter(tmp_path, monkeypatch, ca
     with caplog.at_level("WARNING"):
         assert jit.compile_function(fn) is None  # refused to load: the caller interprets
     assert "failed" in caplog.text
+
+
+def test_without_a_compiler_the_mpc_interprets_with_one_warning_that_says_why(monkeypatch, caplog):
+    from racing_lib.control.mpc.linearize import substep_linearization
+    from racing_lib.model import ModelOptions, ModelParams
+
+    monkeypatch.setenv("CC", "/no/such/dir/cc")
+    substep_linearization.cache_clear()  # built here, not taken from an earlier test
+    try:
+        with caplog.at_level("WARNING"):
+            lin = substep_linearization(ModelParams(), ModelOptions(), 0.1, 2, jit=True)
+    finally:
+        substep_linearization.cache_clear()  # nor left for a later one
+    assert lin.class_name() == "SXFunction"
+    warnings = [r.getMessage() for r in caplog.records if r.levelname == "WARNING"]
+    assert len(warnings) == 1, warnings
+    assert "/no/such/dir/cc" in warnings[0] and "MPCSettings(jit=False)" in warnings[0]
 
 
 def test_the_packed_linearization_is_the_mapped_one():

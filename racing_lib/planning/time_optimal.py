@@ -44,7 +44,7 @@ Formulation choices, each measured on real circuits before it was adopted:
 
 The NLP is assembled from the functions of one interval, differentiated and compiled once per
 parameter set (:mod:`racing_lib.planning.time_optimal_nlp`), so building it for a new track takes
-a tenth of a second; built problems are also kept in a small cache.
+a fraction of a second; built problems are also kept in a small cache.
 """
 
 from __future__ import annotations
@@ -125,8 +125,10 @@ def _shape_settings(st: TimeOptimalSettings) -> TimeOptimalSettings:
     grid or bounds share one cached set of interval functions.
     """
     shaping = ("w_ddelta", "slip_limit", "slip_force_share", "friction_ellipse")
-    shaping += ("drive_axle_circle", "pedal_limits", "jit")
-    return TimeOptimalSettings(**{name: getattr(st, name) for name in shaping})
+    shaping += ("drive_axle_circle", "pedal_limits")
+    kept = {name: getattr(st, name) for name in shaping}
+    # Only the structured graph calls the derivative functions: the others need no compiler run.
+    return TimeOptimalSettings(**kept, jit=st.jit and st.graph == "structured")
 
 
 class _Problem:
@@ -246,10 +248,12 @@ def _failure_advice(kind: str, st: TimeOptimalSettings, status: str) -> str:
     """What to try after a failed NLP: only knobs that exist, with their command-line flags."""
     if status == "Invalid_Option":
         # Nothing was solved: another start or grid would fail the same way.
+        extra = f"ipopt_options {st.ipopt_options!r}, " if st.ipopt_options else ""
         return (
-            f"check TimeOptimalSettings.ipopt_options, now {st.ipopt_options!r}: IPOPT rejected "
-            "one of them (an unknown name, a value out of range, or a linear solver this build "
-            "lacks; print_level=5 in the settings shows which)"
+            f"check the IPOPT options of the settings ({extra}tol {st.tol!r}, max_iter "
+            f"{st.max_iter!r}, print_level {st.print_level!r}): IPOPT rejected one of them, an "
+            "unknown name, a value out of range or a linear solver this build lacks "
+            "(TimeOptimalSettings(print_level=5) shows which)"
         )
     tips = []
     if kind == "warm":

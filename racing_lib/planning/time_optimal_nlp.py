@@ -14,12 +14,12 @@ small blocks:
   the global sparse Jacobian and upper-triangular Hessian with constant index maps
   (:class:`StructuredNLP`), which IPOPT receives as CasADi's ``jac_g``, ``grad_f`` and
   ``hess_lag``;
-* the three derivative functions are compiled to machine code (:mod:`racing_lib.jit`; about a
-  second once per parameter set, then cached on disk). CasADi's interpreter spent 58 % of the
-  solve evaluating them, the Hessian most (40 ms a call on the expressway's 1,464 nodes);
-  compiled, the evaluations take about a fifth of the solve and the rest is IPOPT's own linear
-  algebra, so the solve takes about half the time, to the same plan bit for bit
-  (``benchmarks/bench_plan_speed.py``).
+* the three derivative functions are compiled to machine code (:mod:`racing_lib.jit`: one
+  compiler run per parameter set, options and settings, cached on disk). Evaluated by CasADi's
+  interpreter they took more than half of each solve, the Hessian most; compiled, the
+  evaluations take about a fifth of it and IPOPT's own linear algebra the rest, so a solve takes
+  about half the time, to the same plan bit for bit (``benchmarks/bench_plan_speed.py`` and
+  ``benchmarks/bench_nlp_iteration.py`` measure it).
 
 Why not let CasADi differentiate the whole lap: with one flat SX graph of 1,464 nodes its symbolic
 Hessian took 6.3 s to build (expressway), more than the solve, and had to be rebuilt for every
@@ -67,7 +67,9 @@ class IntervalFunctions:
         constraints.
     con_jac : casadi.Function
         Nonzeros of the constraints' Jacobian with respect to ``(w_a, w_b)``, in the order of
-        ``jac_sparsity``.
+        ``jac_sparsity``. With ``jit`` settings this and the other two derivative functions are
+        compiled (``casadi.external``): they take numbers and MX, not SX, and have no derivatives
+        of their own; ``con`` and ``obj`` stay symbolic.
     obj : casadi.Function
         The interval's lap time (trapezoid in 1/s_dot, s) plus its steering-rate penalty.
     obj_grad : casadi.Function
@@ -187,6 +189,12 @@ def interval_functions(params: Any, options: Any, st: Any) -> IntervalFunctions:
     Returns
     -------
     IntervalFunctions
+
+    Notes
+    -----
+    With ``st.jit`` the first call for a parameter set compiles the derivative functions with
+    the system's C compiler (about a second; the build is kept on disk, :mod:`racing_lib.jit`),
+    or logs one warning and keeps them interpreted when no compiler works.
     """
     import casadi as ca
 
@@ -217,7 +225,10 @@ def interval_functions(params: Any, options: Any, st: Any) -> IntervalFunctions:
         # The derivatives are evaluated at every IPOPT iteration; compiled, they cost a fifth
         # of what CasADi's interpreter takes (the same numbers to the last bit).
         derivatives = compiled_or_interpreted(
-            derivatives, "the time-optimal NLP's derivatives", "TimeOptimalSettings(jit=False)"
+            derivatives,
+            "the time-optimal NLP's derivatives",
+            "TimeOptimalSettings(jit=False)",
+            name="racing_lib_nlp_interval",
         )
     con_jac, obj_grad, hess_fn = derivatives
     return IntervalFunctions(

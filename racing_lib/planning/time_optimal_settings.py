@@ -69,17 +69,19 @@ class TimeOptimalSettings:
     graph : {"structured", "sx", "mx"}
         How the NLP and its derivatives are built. ``"structured"`` (default): one interval's
         functions are differentiated symbolically and mapped over the grid
-        (:mod:`racing_lib.planning.time_optimal_nlp`); expressway, 1,464 nodes: built in 0.1 s.
-        ``"sx"``: the whole lap as one SX graph that CasADi differentiates (6-9 s to build there,
-        the same iterations); ``"mx"``: an MX graph over the mapped node function (fast to build,
-        several times slower per iteration). Both are kept to check the structured derivatives.
+        (:mod:`racing_lib.planning.time_optimal_nlp`); built in a fraction of a second.
+        ``"sx"``: the whole lap as one SX graph that CasADi differentiates (6-9 s to build for
+        the expressway's 1,464 nodes, the same iterations); ``"mx"``: an MX graph over the
+        mapped node function (fast to build, several times slower per iteration). Both are kept
+        to check the structured derivatives.
     jit : bool
         Compile the derivatives of one interval (Jacobian, gradient, Hessian of the Lagrangian)
         with the system C compiler: about a second, once per parameter set, options and settings
         (the build is cached on disk, :mod:`racing_lib.jit`). IPOPT evaluates them at every
-        iteration, and compiled they cost a fifth of CasADi's interpreter: the expressway's solve
+        iteration, and compiled they cost a fraction of what CasADi's interpreter takes: a solve
         takes about half the time, to the same plan bit for bit. Falls back to the interpreter,
-        with a warning, when no compiler works. Used by ``graph="structured"`` only.
+        with one warning, when no compiler works (or on Windows). Used by
+        ``graph="structured"`` only.
     mu_min : float
         Smallest friction coefficient accepted (ice is about 0.1); below it the parameters are
         taken for a mistake and :class:`PlanningError` is raised before solving.
