@@ -13,8 +13,10 @@ Per track and way it prints IPOPT iterations, the solve's wall time (s), the sha
 evaluating functions (the rest is IPOPT's own work, mostly the sparse factorization), seconds per
 km of track, and the planned lap time's difference to the default (%); then, over tracks, the
 median ratio of each way's solve time to the default's and the largest lap-time difference.
-The solve's time leaves out the build (and the first compile of the derivatives). Times are this
-machine's; never run inside the tests.
+The solve's time leaves out the build (and the first compile of the derivatives). SPRAL's OpenMP
+runtime needs ``OMP_CANCELLATION`` and ``OMP_PROC_BIND`` set, so this script sets them for every
+way (they may move MUMPS's times a little against ``bench_plan_speed.py``'s). A way that fails
+is reported and left out of the medians. Times are this machine's; never run inside the tests.
 
 Usage::
 
@@ -33,12 +35,11 @@ os.environ.setdefault("OMP_PROC_BIND", "TRUE")
 
 import statistics  # noqa: E402 - after the OpenMP settings, which must precede any import
 import warnings  # noqa: E402
-from pathlib import Path  # noqa: E402
 
-from _script import argument_parser, run  # noqa: E402
+from _script import argument_parser, run, tracks_to_measure  # noqa: E402
 
+from racing_lib.errors import PlanningError  # noqa: E402
 from racing_lib.planning import TimeOptimalSettings, plan  # noqa: E402
-from racing_lib.tracks import builtin_track_names, load_track  # noqa: E402
 
 #: Each way: (node spacing in m, time-optimal settings).
 WAYS = {
@@ -51,9 +52,16 @@ WAYS = {
 
 
 def solve(track, way: str) -> dict:
-    """One plan of ``track`` the way named: iterations, solve and evaluation time (s), lap (s)."""
+    """One plan of ``track`` the way named: iterations, solve and evaluation time (s), lap (s).
+
+    A way that fails (a casadi build without SPRAL, a grid too coarse for a corner) gives
+    ``{"failed": message}`` instead, so that the other ways and tracks are still measured.
+    """
     spacing, settings = WAYS[way]
-    res = plan(track, "time-optimal", spacing=spacing, time_optimal_settings=settings).details
+    try:
+        res = plan(track, "time-optimal", spacing=spacing, time_optimal_settings=settings).details
+    except PlanningError as exc:
+        return {"failed": str(exc)}
     return {
         "iterations": res.iterations,
         "solve_s": res.solve_time,
@@ -72,11 +80,7 @@ def main() -> None:
     args = parser.parse_args()
     warnings.filterwarnings("ignore")
     ways = ["default", *[w for w in args.ways if w != "default"]]
-    sources: list[str | Path] = list(builtin_track_names())
-    if args.tracks_dir:
-        sources += sorted(Path(args.tracks_dir).glob("*.csv"))
-    tracks = [load_track(src) for src in sources]  # a bad file stops here, before any solve
-    tracks = [t for t in tracks if not args.only or t.name in args.only]
+    tracks = tracks_to_measure(args.tracks_dir, args.only)  # a bad file stops before any solve
     print(
         f"{'track':13s} {'km':>5s} {'way':>12s} {'nodes':>6s} {'it':>4s} {'solve':>6s} "
         f"{'eval':>5s} {'s/km':>5s} {'lap':>9s} {'vs default':>10s}"
@@ -87,6 +91,9 @@ def main() -> None:
         rows[track.name] = {way: solve(track, way) for way in ways}
         base = rows[track.name]["default"]
         for way, r in rows[track.name].items():
+            if "failed" in r or "failed" in base:
+                print(f"{track.name:13s} {km:5.2f} {way:>12s} failed: {r.get('failed', '-')}")
+                continue
             print(
                 f"{track.name:13s} {km:5.2f} {way:>12s} {r['nodes']:6d} {r['iterations']:4d} "
                 f"{r['solve_s']:6.2f} {r['eval_s'] / r['solve_s']:5.0%} {r['solve_s'] / km:5.2f} "
@@ -97,7 +104,14 @@ def main() -> None:
         return
     print("\nover tracks, each way against the default (3 m, compiled, MUMPS):")
     for way in ways[1:]:
-        pairs = [(r[way], r["default"]) for r in rows.values()]
+        pairs = [
+            (r[way], r["default"])
+            for r in rows.values()
+            if "failed" not in r[way] and "failed" not in r["default"]
+        ]
+        if not pairs:
+            print(f"  {way:>12s}: failed on every track")
+            continue
         ratio = statistics.median(a["solve_s"] / b["solve_s"] for a, b in pairs)
         its = statistics.median(a["iterations"] / b["iterations"] for a, b in pairs)
         gap = max(abs(a["lap_s"] / b["lap_s"] - 1) for a, b in pairs)
@@ -105,7 +119,9 @@ def main() -> None:
             f"  {way:>12s}: median solve {ratio:.2f}x, iterations {its:.2f}x; "
             f"largest lap difference {100 * gap:.3f} %"
         )
-    defaults = [r["default"] for r in rows.values()]
+    defaults = [r["default"] for r in rows.values() if "failed" not in r["default"]]
+    if not defaults:
+        return
     share = statistics.median(d["eval_s"] / d["solve_s"] for d in defaults)
     print(f"  the default spends a median {share:.0%} of its solve evaluating functions")
 

@@ -35,14 +35,12 @@ from __future__ import annotations
 import statistics
 import time
 import warnings
-from pathlib import Path
 
-from _script import argument_parser, run
+from _script import argument_parser, run, tracks_to_measure
 
 from racing_lib.planning import DEFAULT_START, TimeOptimalSettings, plan
 from racing_lib.planning.time_optimal import clear_cache
 from racing_lib.planning.time_optimal_nlp import interval_functions
-from racing_lib.tracks import builtin_track_names, load_track
 
 #: The defaults before the structured NLP (both options are IPOPT's own defaults).
 PREVIOUS = TimeOptimalSettings(
@@ -99,9 +97,7 @@ def main() -> None:
     parser.add_argument("--skip-previous", action="store_true", help="skip the slow old default")
     args = parser.parse_args()
     warnings.filterwarnings("ignore")
-    sources: list[str | Path] = list(builtin_track_names())
-    if args.tracks_dir:
-        sources += sorted(Path(args.tracks_dir).glob("*.csv"))
+    tracks = tracks_to_measure(args.tracks_dir, args.only)
     ways = [w for w in WAYS if not (args.skip_previous and w == "previous")]
     header = f"{'track':13s} {'km':>5s}"
     for way in ways:
@@ -109,10 +105,7 @@ def main() -> None:
     print(header)
     rows = {}
     track_km = {}
-    for src in sources:
-        track = load_track(src)
-        if args.only and track.name not in args.only:
-            continue
+    for track in tracks:
         row = bench_track(track, ways, args.repeats)
         rows[track.name] = row
         track_km[track.name] = track.length / 1000
@@ -141,15 +134,14 @@ def main() -> None:
         f"median warm/cold: iterations {its:.2f}, wall {wall:.2f}; "
         f"warm faster on {faster or 'none'}"
     )
-    if "interpreted" in ways:
-        solve = med(r["interpreted"]["solve_s"] / r["cold"]["solve_s"] for r in rows.values())
-        wall = med(r["interpreted"]["wall_s"] / r["cold"]["wall_s"] for r in rows.values())
-        share = {w: med(r[w]["eval_s"] / r[w]["solve_s"] for r in rows.values()) for w in ways}
-        print(
-            f"median interpreted/compiled: solve {solve:.2f}x, wall {wall:.2f}x; share of the "
-            f"solve in evaluations: interpreted {share['interpreted']:.0%}, compiled "
-            f"{share['cold']:.0%}"
-        )
+    solve = med(r["interpreted"]["solve_s"] / r["cold"]["solve_s"] for r in rows.values())
+    wall = med(r["interpreted"]["wall_s"] / r["cold"]["wall_s"] for r in rows.values())
+    share = {w: med(r[w]["eval_s"] / r[w]["solve_s"] for r in rows.values()) for w in ways}
+    print(
+        f"median interpreted/compiled: solve {solve:.2f}x, wall {wall:.2f}x; share of the "
+        f"solve in evaluations: interpreted {share['interpreted']:.0%}, compiled "
+        f"{share['cold']:.0%}"
+    )
     km = {name: track_km[name] for name in rows}
     per_km = {w: med(r[w]["wall_s"] / km[name] for name, r in rows.items()) for w in ways}
     its_km = med(r[new]["iterations"] / km[name] for name, r in rows.items())

@@ -30,11 +30,10 @@ import dataclasses
 import statistics
 import time
 import warnings
-from pathlib import Path
 from typing import Any
 
 import numpy as np
-from _script import argument_parser, run
+from _script import argument_parser, run, tracks_to_measure
 
 from racing_lib.planning import GRIP_MARGIN
 from racing_lib.planning.curvature import TrackGrid
@@ -48,7 +47,6 @@ from racing_lib.planning.time_optimal import (
 )
 from racing_lib.planning.time_optimal_nlp import NXS
 from racing_lib.planning.trajectory import default_model_inputs
-from racing_lib.tracks import builtin_track_names, load_track
 
 #: IPOPT's warm start: take the given multipliers and keep the point where it is.
 WARM_START = (
@@ -143,16 +141,11 @@ def main() -> None:
     warnings.filterwarnings("ignore")
     params, _, options = default_model_inputs(None, None, None)
     params = params.replace(mu=params.mu * (1.0 - GRIP_MARGIN))  # as plan() plans
-    sources: list[str | Path] = list(builtin_track_names())
-    if args.tracks_dir:
-        sources += sorted(Path(args.tracks_dir).glob("*.csv"))
+    tracks = tracks_to_measure(args.tracks_dir, args.only)
     ways = ("cold", "restart", "restart-mono", "coarse")
     print(f"{'track':13s}" + "".join(f" | {w + ' it':>15s} {'wall':>5s} {'lap':>8s}" for w in ways))
     rows = {}
-    for src in sources:
-        track = load_track(src)
-        if args.only and track.name not in args.only:
-            continue
+    for track in tracks:
         rows[track.name] = row = bench_track(track, params, options)
         line = f"{track.name:13s}"
         for w in ways:

@@ -65,3 +65,19 @@ def test_a_missing_track_is_one_line_and_status_2(script, args):
     assert lines[0].startswith("error: ") and "no_such_circuit.csv" in lines[0]
     # The track is checked before any work starts, so nothing was printed as if it would run.
     assert "track" not in proc.stdout.lower()
+
+
+@pytest.mark.parametrize(
+    ("args", "named"),
+    [
+        (("no_such_folder",), "no_such_folder"),  # a mistyped folder measured nothing before
+        (("--only", "Nowhere"), "Nowhere"),  # and a name that matches no track, silently
+    ],
+)
+def test_a_folder_or_name_that_gives_no_track_is_one_line_and_status_2(args, named):
+    for script in ("bench_plan_speed.py", "bench_nlp_iteration.py", "bench_warm_restart.py"):
+        proc = _run(BENCHMARKS / script, *args)
+        assert proc.returncode == 2, (script, proc.stderr)
+        lines = proc.stderr.strip().splitlines()
+        assert len(lines) == 1 and lines[0].startswith("error: ") and named in lines[0], script
+        assert proc.stdout == "", script  # refused before the table's header
