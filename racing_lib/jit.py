@@ -127,8 +127,11 @@ def _compile(fns: Sequence[Any], name: str) -> tuple[list[Any] | None, str]:
 
     if os.name != "posix":
         return None, f"builds are made with a POSIX C compiler, and this is {sys.platform}"
-    compiler = os.environ.get("CC", "cc")
-    command = shlex.split(compiler)
+    compiler = os.environ.get("CC", "").strip() or "cc"
+    try:
+        command = shlex.split(compiler)
+    except ValueError:
+        return None, f"CC={compiler!r} is not a valid command line"
     if not command or shutil.which(command[0]) is None:
         return None, f"no C compiler {compiler!r} on the PATH"
     gen = ca.CodeGenerator(f"{name}.c", {"with_header": False})
@@ -138,15 +141,18 @@ def _compile(fns: Sequence[Any], name: str) -> tuple[list[Any] | None, str]:
     key = hashlib.sha256(
         "\n".join([code, " ".join(CFLAGS), compiler, ca.__version__]).encode("utf-8")
     ).hexdigest()[:16]
-    folder = Path(cache_dir())
-    library = folder / f"{name}_{key}.so"
+    reason = ""
     for _attempt in range(2):  # another process may prune the build between our steps: retry
         try:
+            folder = Path(cache_dir())
+            folder.mkdir(mode=0o700, parents=True, exist_ok=True)  # a temp cleaner removed it
+            library = folder / f"{name}_{key}.so"
             if not library.exists():
                 _build(code, library, compiler)
             os.utime(library)  # most recently used: kept by the pruning below
             loaded = [ca.external(fn.name(), str(library)) for fn in fns]
-        except FileNotFoundError:
+        except FileNotFoundError as exc:
+            reason = str(exc)
             continue
         except (OSError, RuntimeError, subprocess.CalledProcessError) as exc:
             # A folder mounted noexec, a compiler that fails, a damaged build: the caller falls
@@ -155,7 +161,7 @@ def _compile(fns: Sequence[Any], name: str) -> tuple[list[Any] | None, str]:
             return None, f"{compiler}: {detail.strip()[:300]}"
         _prune(folder, name, keep=library)
         return loaded, ""
-    return None, f"{library.name} was removed by another process while it was loaded"
+    return None, f"{compiler}: {reason}"
 
 
 def _build(code: str, library: Path, compiler: str) -> None:

@@ -155,6 +155,21 @@ def test_an_unknown_ipopt_option_is_named_not_blamed_on_the_start(oval):
     assert "warm start" not in msg and "spacing" not in msg  # neither would help
 
 
+@pytest.mark.parametrize(
+    "settings",
+    [
+        TimeOptimalSettings(spacing=2.5, tol=-1.0),
+        TimeOptimalSettings(spacing=2.5, ipopt_options=(("no_such_option", 1),)),
+    ],
+    ids=["bad-value", "unknown-name"],
+)
+def test_options_ipopt_refuses_are_one_planning_error(oval, settings):
+    # CasADi checks them as it builds the solver, before any iteration.
+    with pytest.raises(PlanningError, match="IPOPT refused the options") as err:
+        solve_time_optimal(oval, PARAMS, OPTIONS, settings, start="cold")
+    assert "check the IPOPT options of the settings" in str(err.value)
+
+
 def test_compiled_and_interpreted_derivatives_give_the_same_plan_to_the_bit(oval):
     compiled = solve_time_optimal(oval, PARAMS, OPTIONS, SETTINGS, start="cold")
     plain = TimeOptimalSettings(spacing=2.5, jit=False)

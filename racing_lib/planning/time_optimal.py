@@ -248,13 +248,7 @@ def _failure_advice(kind: str, st: TimeOptimalSettings, status: str) -> str:
     """What to try after a failed NLP: only knobs that exist, with their command-line flags."""
     if status == "Invalid_Option":
         # Nothing was solved: another start or grid would fail the same way.
-        extra = f"ipopt_options {st.ipopt_options!r}, " if st.ipopt_options else ""
-        return (
-            f"check the IPOPT options of the settings ({extra}tol {st.tol!r}, max_iter "
-            f"{st.max_iter!r}, print_level {st.print_level!r}): IPOPT rejected one of them, an "
-            "unknown name, a value out of range or a linear solver this build lacks "
-            "(TimeOptimalSettings(print_level=5) shows which)"
-        )
+        return _option_advice(st)
     tips = []
     if kind == "warm":
         tips.append("the cold start (start='cold'; on the command line --start cold)")
@@ -273,6 +267,16 @@ def _failure_advice(kind: str, st: TimeOptimalSettings, status: str) -> str:
     )
     tips.append("a check of the friction coefficient mu of the parameter set")
     return "; ".join(tips)
+
+
+def _option_advice(st: Any) -> str:
+    """What to check when IPOPT refuses the options of settings ``st`` (any planner's)."""
+    extra = f"ipopt_options {st.ipopt_options!r}, " if st.ipopt_options else ""
+    return (
+        f"check the IPOPT options of the settings ({extra}tol {st.tol!r}, max_iter "
+        f"{st.max_iter!r}, print_level {st.print_level!r}): an unknown name, a value out of "
+        "range or a linear solver this build lacks"
+    )
 
 
 def trapezoid_lap_time(inv_sdot: Any, grid: Any) -> Any:
@@ -316,7 +320,16 @@ def ipopt_solver(
     ipopt.update(dict(defaults))
     ipopt.update(dict(st.ipopt_options))
     opts = {"ipopt": ipopt, "print_time": False, **(derivatives or {})}
-    return ca.nlpsol(name, "ipopt", nlp, opts)
+    try:
+        return ca.nlpsol(name, "ipopt", nlp, opts)
+    except RuntimeError as exc:
+        # CasADi checks the options as it builds the solver; its message is a long trace.
+        said = [line for line in str(exc).splitlines() if "option" in line.lower()]
+        detail = said[-1].strip() if said else str(exc).splitlines()[-1].strip()
+        raise PlanningError(
+            f"IPOPT refused the options of the {name} NLP ({detail[:200]}). Try: "
+            f"{_option_advice(st)}."
+        ) from None
 
 
 # long function: the NLP's set-up, solve and fallbacks, read against the paper's formulation in one

@@ -67,9 +67,9 @@ class IntervalFunctions:
         constraints.
     con_jac : casadi.Function
         Nonzeros of the constraints' Jacobian with respect to ``(w_a, w_b)``, in the order of
-        ``jac_sparsity``. With ``jit`` settings this and the other two derivative functions are
-        compiled (``casadi.external``): they take numbers and MX, not SX, and have no derivatives
-        of their own; ``con`` and ``obj`` stay symbolic.
+        ``jac_sparsity``. With ``jit`` settings, where a C compiler works, this and the other two
+        derivative functions are compiled (``casadi.external``): they take numbers and MX, not
+        SX, and have no derivatives of their own; ``con`` and ``obj`` stay symbolic.
     obj : casadi.Function
         The interval's lap time (trapezoid in 1/s_dot, s) plus its steering-rate penalty.
     obj_grad : casadi.Function
@@ -222,7 +222,7 @@ def interval_functions(params: Any, options: Any, st: Any) -> IntervalFunctions:
         ca.Function("interval_hess", [*args, sigma, lam], [hess.nz[:]]),
     ]
     if st.jit:
-        # The derivatives are evaluated at every IPOPT iteration; compiled, they cost a fifth
+        # The derivatives are evaluated at every IPOPT iteration; compiled, they cost a fraction
         # of what CasADi's interpreter takes (the same numbers to the last bit).
         derivatives = compiled_or_interpreted(
             derivatives,
