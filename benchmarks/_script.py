@@ -1,10 +1,12 @@
-"""What every benchmark script shares: its ``--help`` and how it ends.
+"""What every benchmark script shares: its ``--help``, its tracks and how it ends.
 
 Each script is run as ``python benchmarks/<name>.py`` (its folder is then first on ``sys.path``,
 so ``from _script import ...`` finds this module). :func:`argument_parser` shows the script's
 whole docstring under ``--help``, usage examples included; :func:`run` turns the library's own
 errors (a track file that does not exist, a plan that fails) into one line on stderr and exit
-status 2, and Ctrl-C into exit status 130, instead of a traceback.
+status 2, and Ctrl-C into exit status 130, instead of a traceback. :func:`tracks_to_measure`
+loads the built-in tracks and a folder's CSV files before any work starts, and refuses a folder
+or a name that would silently measure less than was asked.
 """
 
 from __future__ import annotations
@@ -64,7 +66,7 @@ def tracks_to_measure(tracks_dir: str | None, only: list[str] | None) -> list[Tr
         a track that is not there (each would otherwise measure less than was asked, silently).
     """
     sources: list[str | Path] = list(builtin_track_names())
-    if tracks_dir is not None:
+    if tracks_dir:
         folder = Path(tracks_dir)
         files = sorted(folder.glob("*.csv")) if folder.is_dir() else []
         if not files:

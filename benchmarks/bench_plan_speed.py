@@ -1,7 +1,7 @@
 """How fast the time-optimal plan is: warm against cold, the default against the previous default.
 
 For each track, ``plan(track, "time-optimal")`` is run as a user runs it (curvature QP, NLP build
-and solve, nothing cached from an earlier track) in three ways:
+and solve, nothing cached from an earlier track) in four ways:
 
 * ``previous``: the planner as it was before issue 14: one flat CasADi SX graph differentiated
   by CasADi (``graph="sx"``), IPOPT's own starting point (``mu_init`` 0.1, bound multipliers 1),
@@ -118,8 +118,6 @@ def main() -> None:
                 f" {r['lap_s']:8.3f}"
             )
         print(line, flush=True)
-    if not rows:
-        return
     med = statistics.median
     new = DEFAULT_START  # the way plan() runs unless told otherwise
     worst_wall = max(r[new]["wall_s"] for r in rows.values())

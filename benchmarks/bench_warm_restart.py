@@ -155,8 +155,6 @@ def main() -> None:
                 its += f" ({r['fine_iterations']} fine)"
             line += f" | {its:>15s} {r['wall_s']:5.1f} {r['lap_s']:8.3f}" + ("" if r["ok"] else "!")
         print(line, flush=True)
-    if not rows:
-        return
     print("\n(coarse: iterations on the 6 m grid plus on the 3 m grid; '!' marks a failed solve)")
     for w in ways[1:]:
         fewer = sum(r[w]["iterations"] < r["cold"]["iterations"] for r in rows.values())
