@@ -104,12 +104,11 @@ def main() -> None:
         header += f" | {way + ' it':>14s} {'build':>5s} {'wall':>5s} {'eval':>4s} {'lap':>8s}"
     print(header)
     rows = {}
-    track_km = {}
+    km = {track.name: track.length / 1000 for track in tracks}
     for track in tracks:
         row = bench_track(track, ways, args.repeats)
         rows[track.name] = row
-        track_km[track.name] = track.length / 1000
-        line = f"{track.name:13s} {track.length / 1000:5.2f}"
+        line = f"{track.name:13s} {km[track.name]:5.2f}"
         for way in ways:
             r = row[way]
             share = r["eval_s"] / r["solve_s"]
@@ -140,7 +139,6 @@ def main() -> None:
         f"solve in evaluations: interpreted {share['interpreted']:.0%}, compiled "
         f"{share['cold']:.0%}"
     )
-    km = {name: track_km[name] for name in rows}
     per_km = {w: med(r[w]["wall_s"] / km[name] for name, r in rows.items()) for w in ways}
     its_km = med(r[new]["iterations"] / km[name] for name, r in rows.items())
     print(
