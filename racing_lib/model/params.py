@@ -234,6 +234,9 @@ class PedalMap:
         """
         if self.p_thr is None:
             return self.m_thr
+        if isinstance(v_x, float):
+            # Written so that NaN propagates as through np.minimum and np.maximum.
+            return min(self.p_thr / max(v_x, 1.0), self.m_thr)
         if isinstance(v_x, ca.SX | ca.MX | ca.DM):
             return ca.fmin(self.m_thr, self.p_thr / ca.fmax(v_x, 1.0))
         return np.minimum(self.m_thr, self.p_thr / np.maximum(np.asarray(v_x, dtype=float), 1.0))
@@ -317,18 +320,35 @@ class PedalMap:
 
         Shapes as in :meth:`ax`; numpy only (the controller's last step).
         """
-        scalar = np.ndim(xi) == 1 and np.ndim(a_x) == 0
+        if np.ndim(xi) == 1 and np.ndim(a_x) == 0:
+            # The controller's case, once a step: the same IEEE arithmetic on Python floats costs
+            # a quarter of numpy's on one-element arrays.
+            excess = float(a_x) - float(self._base(xi)[0])
+            gain = self.throttle_gain(float(state_rows(xi)[0, X.VX]))
+            return self._invert(excess, gain, _select, min, max)
         excess = np.asarray(a_x, dtype=float) - self._base(xi)
         gain = self.throttle_gain(self._speed(xi))
+        return self._invert(excess, gain, np.where, np.minimum, np.maximum)
+
+    def _invert(self, excess: Any, gain: Any, select: Any, fmin: Any, fmax: Any) -> Any:
+        """Pedal for the acceleration ``excess`` (m/s^2) over the pedal-free part; clipped.
+
+        ``gain`` is full throttle's acceleration (m/s^2). ``select(cond, a, b)``, ``fmin`` and
+        ``fmax`` are numpy's ufuncs for arrays, or their Python forms for floats.
+        """
         u_brake = excess / self.m_brk
         knee = self._brake_knee()
         if knee is not None:
             u_k, a_k, slope = knee
-            u_brake = np.where(excess >= -a_k, u_brake, u_k + (excess + a_k) / slope)
-        u_p = np.where(excess >= 0.0, excess / gain, u_brake)
-        # np.clip's own wrapper costs more than the rest on the controller's single value.
-        u_p = np.minimum(np.maximum(u_p, -1.0), 1.0)
-        return float(u_p[0]) if scalar else u_p
+            u_brake = select(excess >= -a_k, u_brake, u_k + (excess + a_k) / slope)
+        u_p = select(excess >= 0.0, excess / gain, u_brake)
+        # Not np.clip: its Python wrapper costs more than the rest on a single value.
+        return fmin(fmax(u_p, -1.0), 1.0)
+
+
+def _select(cond: bool, a: float, b: float) -> float:
+    """``np.where`` for one value."""
+    return a if cond else b
 
 
 def _check_keys(what: str, data: Mapping[str, Any], allowed: set[str]) -> None:

@@ -84,7 +84,8 @@ class PlanTable:
         # MPC's 26 stages. (The upper bound matters: a tiny negative s wraps to exactly length.)
         np.minimum(np.maximum(i, 0, out=i), self.s.size - 2, out=i)
         w = ((sq - self.s[i]) / (self.s[i + 1] - self.s[i]))[:, None]
-        return self.table[i] * (1.0 - w) + self.table[i + 1] * w
+        # take() gathers rows in a third of the time of fancy indexing, with the same values.
+        return self.table.take(i, axis=0) * (1.0 - w) + self.table.take(i + 1, axis=0) * w
 
     def time_at(self, s: float) -> float:
         """Plan time at arc length ``s`` within the lap, s."""
@@ -396,7 +397,7 @@ class MPCBase:
         """
         if u_plan is None:
             return self._fallback(xi0, u_ref0, status)
-        self._shift_buffer = [u_plan[k] for k in range(1, len(u_plan))]
+        self._shift_buffer = list(u_plan[1:])
         u0 = u_plan[0]
         return self._apply(self._clip_steer(u0[U.DELTA]), float(u0[U.AX]), xi0)
 

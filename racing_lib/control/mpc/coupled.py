@@ -18,7 +18,7 @@ from racing_lib.control.mpc.qp_problem import (
     QPData,
     QPShape,
 )
-from racing_lib.control.mpc.settings import COUPLED_STATES, MX, MPCSettings
+from racing_lib.control.mpc.settings import COUPLED_SLICE, COUPLED_STATES, MX, MPCSettings
 from racing_lib.interfaces import Command
 from racing_lib.model import NU, U, X
 
@@ -146,12 +146,12 @@ class CoupledMPC(MPCBase):
         t2 = time.perf_counter()
         A, B, d = self.linearize(xi_hat[:N], u_lin, kappa, theta)
         t3 = time.perf_counter()
-        idx = COUPLED_STATES
+        idx = COUPLED_SLICE
         A_q, B_q, d_q = augment_steering_lag(
-            A[:, idx[:, None], idx[None, :]], B[:, idx, :], d[:, idx], U.DELTA, st.steer_tau, st.dt
+            A[:, idx, idx], B[:, idx, :], d[:, idx], U.DELTA, st.steer_tau, st.dt
         )
         x_ref = np.zeros((N, len(MX)))
-        x_ref[:, : len(idx)] = xi_ref[1:, idx]
+        x_ref[:, : len(COUPLED_STATES)] = xi_ref[1:, idx]
         data = QPData(
             x0=np.append(xi0[idx], self._delta_est),
             A=A_q,

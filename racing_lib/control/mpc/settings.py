@@ -18,7 +18,7 @@ from racing_lib.vehicle.params import VehicleParams
 #: The car whose data sheet gives the defaults of the car's dimensions and actuator.
 _CAR = VehicleParams()
 
-__all__ = ["COUPLED_STATES", "LATERAL_STATES", "MX", "MPCSettings"]
+__all__ = ["COUPLED_SLICE", "COUPLED_STATES", "LATERAL_STATES", "MX", "MPCSettings"]
 
 
 class MX(IntEnum):
@@ -36,8 +36,11 @@ class MX(IntEnum):
     DELTA = 5  #: actual steering angle behind the actuator lag, rad (estimated, not weighted)
 
 
+#: The coupled MPC's states within the model's state: the first five, in :class:`MX` order (a
+#: slice, so that selecting them takes views rather than copies).
+COUPLED_SLICE = slice(X.VX, X.EY + 1)
 #: Model-state indices of the coupled MPC's states, in :class:`MX` order.
-COUPLED_STATES = np.array([X.VX, X.VY, X.R, X.EPSI, X.EY])
+COUPLED_STATES = np.arange(len(X))[COUPLED_SLICE]
 #: Model-state indices of the lateral MPC's states (v_y, r, e_psi, e_y).
 LATERAL_STATES = np.array([X.VY, X.R, X.EPSI, X.EY])
 
