@@ -471,14 +471,18 @@ def test_pedal_of_one_value_is_the_array_result_bit_for_bit(limited: bool) -> No
     pm = PedalMap(m_0=0.3, m_xi=(-0.02, 0.01, 0.0, 0.0, 0.0, 0.0), m_thr=4.0, m_brk=12.0, **extra)
     xi, _, _, _ = random_points(rng, 300)
     xi[:, X.VX] = rng.uniform(-2.0, 60.0, 300)  # below 1 m/s too, where the gain's floor acts
+    xi[3:5, X.VX] = [np.inf, -np.inf]  # no throttle gain left at an infinite speed
     # Every branch: throttle, linear brake, past the brake knee, and beyond both ends (clipped).
     a_x = rng.uniform(-16.0, 8.0, 300)
-    a_x[:3] = [0.0, -8.0, np.nan]  # on the switch, on the knee, and a NaN that must come through
+    a_x[0] = pm._base(xi[0])[0]  # exactly on the switch from brake to throttle
+    a_x[1:3] = [np.nan, -0.0]
+    a_x[5:7] = [np.inf, -np.inf]
     batch = pm.pedal(a_x, xi)
     one = [pm.pedal(float(a), row) for a, row in zip(a_x, xi, strict=True)]
     assert all(isinstance(u_p, float) for u_p in one)
     assert np.array_equal(np.array(one), batch, equal_nan=True)
-    assert np.isnan(one[2]) and np.all(np.abs(batch[3:]) <= 1.0)
+    assert np.array_equal(np.signbit(one), np.signbit(batch))
+    assert np.isnan(one[1]) and np.all(np.abs(batch[2:]) <= 1.0)
 
 
 def test_pedal_map_single_slope_is_the_paper_map_and_coefficients_round_trip() -> None:

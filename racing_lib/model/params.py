@@ -320,21 +320,26 @@ class PedalMap:
 
         Shapes as in :meth:`ax`; numpy only (the controller's last step).
         """
-        if np.ndim(xi) == 1 and np.ndim(a_x) == 0:
+        scalar = np.ndim(xi) == 1 and np.ndim(a_x) == 0
+        if scalar:
             # The controller's case, once a step: the same IEEE arithmetic on Python floats costs
             # a quarter of numpy's on one-element arrays.
             excess = float(a_x) - float(self._base(xi)[0])
             gain = self.throttle_gain(float(state_rows(xi)[0, X.VX]))
-            return self._invert(excess, gain, _select, min, max)
+            if gain > 0.0:  # else an infinite (or NaN) speed: Python floats raise on x / 0
+                return self._invert(excess, gain, _select, min, max)
         excess = np.asarray(a_x, dtype=float) - self._base(xi)
         gain = self.throttle_gain(self._speed(xi))
-        return self._invert(excess, gain, np.where, np.minimum, np.maximum)
+        u_p = self._invert(excess, gain, np.where, np.minimum, np.maximum)
+        return float(u_p[0]) if scalar else u_p
 
     def _invert(self, excess: Any, gain: Any, select: Any, fmin: Any, fmax: Any) -> Any:
         """Pedal for the acceleration ``excess`` (m/s^2) over the pedal-free part; clipped.
 
         ``gain`` is full throttle's acceleration (m/s^2). ``select(cond, a, b)``, ``fmin`` and
-        ``fmax`` are numpy's ufuncs for arrays, or their Python forms for floats.
+        ``fmax`` are ``np.where``, ``np.minimum`` and ``np.maximum`` for arrays, or their Python
+        forms for floats (with ``u_p`` as the first argument, so that NaN passes through ``min``
+        and ``max`` as it does through numpy).
         """
         u_brake = excess / self.m_brk
         knee = self._brake_knee()

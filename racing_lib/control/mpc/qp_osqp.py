@@ -27,14 +27,17 @@ __all__ = ["TrackingQP"]
 
 
 class _Result(NamedTuple):
-    """What a step reads of an OSQP solve: the solution ``x`` and OSQP's ``info`` object."""
+    """What a step reads of an OSQP solve: the solution ``x`` and OSQP's ``info`` object.
+
+    ``info`` is OSQP's live object, which the next solve overwrites: read it at once.
+    """
 
     x: np.ndarray | None
     info: Any
 
 
-# The methods of OSQP's extension object (osqp >= 1.0) that a control step calls.
-_EXT_METHODS = ("update_data_vec", "update_data_mat", "solve", "info", "solution")
+# The attributes of OSQP's extension object (osqp >= 1.0) that a control step uses.
+_EXT_ATTRIBUTES = ("update_data_vec", "update_data_mat", "solve", "info", "solution")
 
 
 class TrackingQP:
@@ -106,10 +109,10 @@ class TrackingQP:
         # namespace: 35-40 us of a step of about 900 us, for the same numbers from the same C
         # calls (tested). The wrapper stays the way in for setup and warm starts.
         self._ext = getattr(self._solver, "_solver", None)
-        if not all(hasattr(self._ext, name) for name in _EXT_METHODS):
+        if not all(hasattr(self._ext, name) for name in _EXT_ATTRIBUTES):
             self._ext = None  # an OSQP whose internals moved: take the wrapper's way
         # OSQP's bounds are finite: +-infinity is its OSQP_INFTY (what the wrapper clips to).
-        self._osqp_inf = float(osqp.constant("OSQP_INFTY", algebra="builtin"))
+        self._osqp_inf = float(self._solver.constant("OSQP_INFTY"))
         self._l_osqp = np.empty(self._n_rows)
         self._u_osqp = np.empty(self._n_rows)
         self._has_solution = False
@@ -356,14 +359,15 @@ class TrackingQP:
             objective=objective,
         )
 
-    def _osqp_solve(self, Ax: np.ndarray, q: np.ndarray) -> Any:
-        """Give OSQP the step's matrix values, cost and bounds; solve; return its result.
+    def _osqp_solve(self, Ax: np.ndarray, q: np.ndarray) -> _Result:
+        """Give OSQP the values of A, the cost ``q`` and the bounds ``self._l, self._u``; solve.
 
         The result has OSQP's ``x`` and ``info`` (``status``, ``iter``, ``obj_val``).
         """
         if self._ext is None:
             self._solver.update(Ax=Ax, q=q, l=self._l, u=self._u)
-            return self._solver.solve(raise_error=False)
+            res = self._solver.solve(raise_error=False)
+            return _Result(x=res.x, info=res.info)
         ext = self._ext
         np.maximum(self._l, -self._osqp_inf, out=self._l_osqp)
         np.minimum(self._u, self._osqp_inf, out=self._u_osqp)
