@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
@@ -153,3 +154,17 @@ def test_nominal_controller_laps_each_builtin_track_cleanly(name):
     assert m.wall_contacts == 0 and m.offtrack_time_s == 0.0
     assert m.lap_time_s == pytest.approx(reference.lap_time, rel=0.03)
     assert m.ey_max_m < 3.0
+
+
+def test_a_non_finite_observation_is_refused_and_a_huge_finite_one_is_not():
+    # The check adds the values first (one test a step); an overflowing sum of finite values must
+    # still pass, and any NaN or infinity must still be named.
+    from racing_lib.experiments.lap import _check_observation
+
+    huge = Observation(0.0, 1e308, 1e308, 0.0, 1e308, 0.0, 0.0)
+    _check_observation(huge, 3)
+    for field in ("x", "vx", "r", "t"):
+        for bad in (float("nan"), float("inf"), -float("inf")):
+            obs = dataclasses.replace(huge, **{field: bad})
+            with pytest.raises(PlantError, match="non-finite observation at step 3"):
+                _check_observation(obs, 3)

@@ -329,6 +329,19 @@ def test_heuristic_trajectory_and_reference(circle_setup):
     np.testing.assert_allclose(np.diff(xi_ref[:, X.S]), 20.0 * 0.1, rtol=1e-6)
     np.testing.assert_allclose(xi_ref[:, X.VX], 20.0)
     assert np.all(xi_ref[:, X.EY] == 0.0)
+    # The plan table's columns are copied by slices: each lands in its own state and input.
+    from racing_lib.control.mpc.base import PlanTable
+
+    states = [PlanTable.VX, PlanTable.VY, PlanTable.R, PlanTable.EPSI]
+    assert list(range(NX))[PlanTable.STATES] == states == [X.VX, X.VY, X.R, X.EPSI]
+    assert list(range(10))[PlanTable.INPUTS] == [PlanTable.DELTA, PlanTable.AX]
+    assert [U.DELTA, U.AX] == [0, 1]
+    rows = mpc._plan.at_s(xi_ref[:, X.S])
+    for col, name in ((PlanTable.VX, "VX"), (PlanTable.VY, "VY"), (PlanTable.R, "R"),
+                      (PlanTable.EPSI, "EPSI")):  # fmt: skip
+        np.testing.assert_array_equal(xi_ref[:, X[name]], rows[:, col])
+    np.testing.assert_array_equal(u_ref[:, U.DELTA], rows[:, PlanTable.DELTA])
+    np.testing.assert_array_equal(u_ref[:, U.AX], rows[:, PlanTable.AX])
     # The car 1 m left of the plan, heading along it.
     x, y, psi = plan.path.to_cartesian(s0, 1.0, 0.0)
     obs = Observation(0.0, float(x), float(y), float(psi), 20.0, 0.0, 0.25)

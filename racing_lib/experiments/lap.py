@@ -157,7 +157,8 @@ def _speed_lookup(reference: Reference) -> Callable[[np.ndarray], np.ndarray]:
 
 def _check_observation(obs: Observation, step: int) -> None:
     values = (obs.t, obs.x, obs.y, obs.psi, obs.vx, obs.vy, obs.r)
-    if not all(math.isfinite(v) for v in values):
+    # A finite sum has only finite terms: one test instead of seven on every step of a lap.
+    if not math.isfinite(sum(values)) and not all(math.isfinite(v) for v in values):
         raise PlantError(
             f"the plant returned a non-finite observation at step {step} (t = {obs.t}): {obs}. "
             "The plant's state diverged; check its commands and parameters (a smaller time step "

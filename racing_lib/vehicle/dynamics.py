@@ -7,8 +7,9 @@ with it), so both import it from here instead of from each other. The discrete p
 walls, edge friction) stay in `racing_lib.sim.SimulatedCar`.
 
 `rk4_substep_function` is one RK4 substep of that same vector field as a CasADi Function: the
-simulated car evaluates it in place (`racing_lib.jit.BufferedFunction`), about ten times faster
-than the float path, with the equations still written once.
+simulated car compiles it (`racing_lib.jit`) and evaluates it in place
+(`racing_lib.jit.BufferedFunction`), many times faster than the float path, with the equations
+still written once.
 """
 
 from __future__ import annotations

@@ -48,6 +48,10 @@ class PlanTable:
 
     # Column indices of the table.
     VX, VY, R, EPSI, DELTA, AX, KAPPA, THETA, BMIN, BMAX = range(10)
+    #: The columns of the states v_x, v_y, r, e_psi and of the inputs delta, a_x: the same
+    #: positions as in the model's state (`X`) and input (`U`) vectors.
+    STATES = slice(VX, EPSI + 1)
+    INPUTS = slice(DELTA, AX + 1)
 
     def __init__(self, plan: Any, theta: np.ndarray, band_min: np.ndarray, band_max: np.ndarray):
         self.length = float(plan.path.length)
@@ -73,6 +77,9 @@ class PlanTable:
         )
         self.s = np.append(s, self.length)
         self.table = np.vstack([cols, cols[:1]])
+        # Per interval: its length and the row at its end, so that a lookup gathers each once.
+        self._ds = self.s[1:] - self.s[:-1]
+        self._next = self.table[1:].copy()
         t = np.asarray(plan.t, dtype=float)
         self.t = np.append(t, self.lap_time)
 
@@ -83,9 +90,9 @@ class PlanTable:
         # In place rather than np.clip, whose Python wrapper costs more than the search on the
         # MPC's 26 stages. (The upper bound matters: a tiny negative s wraps to exactly length.)
         np.minimum(np.maximum(i, 0, out=i), self.s.size - 2, out=i)
-        w = ((sq - self.s[i]) / (self.s[i + 1] - self.s[i]))[:, None]
+        w = ((sq - self.s.take(i)) / self._ds.take(i))[:, None]
         # take() gathers rows in a third of the time of fancy indexing, with the same values.
-        return self.table.take(i, axis=0) * (1.0 - w) + self.table.take(i + 1, axis=0) * w
+        return self.table.take(i, axis=0) * (1.0 - w) + self._next.take(i, axis=0) * w
 
     def time_at(self, s: float) -> float:
         """Plan time at arc length ``s`` within the lap, s."""
@@ -274,12 +281,10 @@ class MPCBase:
         s_k = s_k - s_k[0] + s0
         rows = self._plan.at_s(s_k)
         xi_ref = np.zeros((st.horizon + 1, NX))
-        xi_ref[:, X.VX] = rows[:, PlanTable.VX]
-        xi_ref[:, X.VY] = rows[:, PlanTable.VY]
-        xi_ref[:, X.R] = rows[:, PlanTable.R]
-        xi_ref[:, X.EPSI] = rows[:, PlanTable.EPSI]
+        # Slices, not one column at a time: the table keeps these columns in the model's order.
+        xi_ref[:, PlanTable.STATES] = rows[:, PlanTable.STATES]
         xi_ref[:, X.S] = s_k
-        u_ref = rows[:, [PlanTable.DELTA, PlanTable.AX]]
+        u_ref = rows[:, PlanTable.INPUTS]
         return xi_ref, u_ref, rows
 
     def linearize(

@@ -152,8 +152,11 @@ class CoupledMPC(MPCBase):
         )
         x_ref = np.zeros((N, len(MX)))
         x_ref[:, : len(COUPLED_STATES)] = xi_ref[1:, idx]
+        x0 = np.empty(len(MX))  # the coupled states, then the estimated steering angle
+        x0[:-1] = xi0[idx]
+        x0[-1] = self._delta_est
         data = QPData(
-            x0=np.append(xi0[idx], self._delta_est),
+            x0=x0,
             A=A_q,
             B=B_q,
             d=d_q,

@@ -284,7 +284,9 @@ def check_qp_data(shape: QPShape, data: QPData) -> None:
         "u_max": (N, m),
     }
     for name, shp in expected.items():
-        got = np.shape(getattr(data, name))
+        value = getattr(data, name)
+        # An array's own attribute: np.shape's wrapper costs more than the check, each step.
+        got = value.shape if isinstance(value, np.ndarray) else np.shape(value)
         if got != shp:
             raise ControlError(f"QPData.{name} must have shape {shp}, got {got}.")
     if shape.band_index is not None:
