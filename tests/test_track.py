@@ -249,6 +249,28 @@ def test_tracker_heading_is_the_paths_at_the_projection():
     assert abs(wrap_angle(tracker.heading - float(path.heading(s)))) < 1e-9
 
 
+def test_two_trackers_on_one_path_get_what_each_would_get_alone():
+    # The path remembers its last projection (a lap projects each position twice onto the plan's
+    # line); a tracker sharing the path must see exactly what it sees on a path of its own, and
+    # a different start point must not be answered from the memory.
+    track = load_track("shortcut")
+    shared, own = track.centerline, load_track("shortcut").centerline
+    s = np.arange(0.0, 600.0, 2.5)
+    x, y, _ = shared.to_cartesian(s, 1.2 * np.sin(s / 23.0))
+    a, b, alone = FrenetTracker(shared), FrenetTracker(shared), FrenetTracker(own)
+    lagging = FrenetTracker(shared)  # projects every point from one step further back
+    for k, (xi, yi) in enumerate(zip(x.tolist(), y.tolist(), strict=True)):
+        want = alone.project(xi, yi)
+        assert a.project(xi, yi) == want
+        assert b.project(xi, yi) == want  # answered from the memory
+        if k % 2 == 0:
+            assert lagging.project(xi, yi) == pytest.approx(want, abs=1e-9)
+    x5, y5 = float(x[5]), float(y[5])
+    assert shared._newton_scalar(x5, y5, 7.0) == own._newton_scalar_from(x5, y5, 7.0)
+    shared._newton_scalar(x5, y5, 9.0)
+    assert shared._last_projection[0] == (x5, y5, 9.0)  # computed afresh, not answered
+
+
 def test_tracker_reset_and_jump():
     track = load_track("shortcut")
     path = track.centerline

@@ -180,6 +180,10 @@ class Path:
         d = self._xy(t[:-1], 1)
         self._knot_heading = np.unwrap(np.arctan2(d[:, 1], d[:, 0]))
         self._kdtree: cKDTree | None = None
+        # The last scalar projection, ((x, y, s_start), result): a closed-loop lap projects each
+        # position twice onto the plan's line from the same start (the controller, then the
+        # lap's log). One attribute, so that threads sharing the path read a consistent pair.
+        self._last_projection: tuple[tuple[float, float, float], tuple] = ((math.nan,) * 3, ())
 
     # ---------------------------------------------------------------- evaluation
     @property
@@ -349,6 +353,16 @@ class Path:
         Returns s (m), e_y (m), the path heading at s wrapped to [-pi, pi) (rad) and whether
         the iteration converged.
         """
+        key = (x, y, s)
+        last_key, last_result = self._last_projection
+        if key == last_key:
+            return last_result
+        result = self._newton_scalar_from(x, y, s)
+        self._last_projection = (key, result)
+        return result
+
+    def _newton_scalar_from(self, x: float, y: float, s: float) -> tuple[float, float, float, bool]:
+        """The Newton iteration of :meth:`_newton_scalar`, without its memory."""
         length = self.length
         kn = self._knots
         knots, bucket, hb, last = kn._s_list, kn._bucket, kn.hb, kn.n - 1
