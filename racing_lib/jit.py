@@ -40,7 +40,8 @@ MAX_BUILDS = 16
 #: Flags of the C compiler (-O1: as fast as -O3 for this code, and compiles in a third of the time;
 #: -ffp-contract=off: no fused multiply-adds, which some processors' compilers would otherwise emit,
 #: so compiled code computes what CasADi's interpreter computes, to the last bit, with any
-#: compiler that does not default to fast math, as gcc and clang do not).
+#: compiler that does not default to fast math, as gcc and clang do not; only a zero may come out
+#: with the other sign, which no comparison and no later sum can tell apart).
 CFLAGS = ("-O1", "-ffp-contract=off", "-fPIC", "-shared")
 
 
@@ -121,10 +122,16 @@ def compiled_or_interpreted(
     return list(fns)
 
 
-def _compile(fns: Sequence[Any], name: str) -> tuple[list[Any] | None, str]:
-    """The compiled functions and ``""``, or None and the reason they could not be had."""
-    import casadi as ca
+def c_compiler() -> tuple[str | None, str]:
+    """The C compiler builds are made with (``$CC``, else ``cc``) and ``""``, or None and why not.
 
+    Returns
+    -------
+    compiler : str or None
+        The compiler's command line, when this is a POSIX system and its program is on the PATH.
+    reason : str
+        Why there is no compiler (empty when there is one).
+    """
     if os.name != "posix":
         return None, f"builds are made with a POSIX C compiler, and this is {sys.platform}"
     compiler = os.environ.get("CC", "").strip() or "cc"
@@ -134,6 +141,16 @@ def _compile(fns: Sequence[Any], name: str) -> tuple[list[Any] | None, str]:
         return None, f"CC={compiler!r} is not a valid command line"
     if not command or shutil.which(command[0]) is None:
         return None, f"no C compiler {compiler!r} on the PATH"
+    return compiler, ""
+
+
+def _compile(fns: Sequence[Any], name: str) -> tuple[list[Any] | None, str]:
+    """The compiled functions and ``""``, or None and the reason they could not be had."""
+    import casadi as ca
+
+    compiler, reason = c_compiler()
+    if compiler is None:
+        return None, reason
     gen = ca.CodeGenerator(f"{name}.c", {"with_header": False})
     for fn in fns:
         gen.add(fn)

@@ -59,8 +59,9 @@ _TWO_PI = 2.0 * math.pi
 def _substep_function(params: VehicleParams, jit: bool) -> Any:
     """The car's RK4 substep (`rk4_substep_function`), compiled when ``jit`` and a C compiler work.
 
-    Compiled code computes the interpreter's numbers to the last bit (`racing_lib.jit`), in a
-    third of its time. Kept per process, since a lap builds a new car.
+    Compiled code computes the interpreter's values to the last bit (`racing_lib.jit`; only a
+    zero may differ in sign), in a third of its time. Kept per process, since a lap builds a new
+    car: a build that failed is not tried again until the next process.
     """
     fn = rk4_substep_function(params)
     if not jit:
@@ -93,8 +94,8 @@ class SimulatedCar:
     jit : bool
         Evaluate the substep as machine code (built by the system C compiler once per parameter
         set, about 0.2 s, and cached on disk by :mod:`racing_lib.jit`): the same numbers as
-        CasADi's interpreter, to the last bit, about three times faster. Without a compiler the
-        car warns and uses the interpreter.
+        CasADi's interpreter, to the last bit (only a zero may differ in sign), about three times
+        faster. Without a compiler the car warns and uses the interpreter.
 
     Attributes
     ----------

@@ -186,6 +186,23 @@ def test_qp_reports_failure_instead_of_raising():
     assert np.all(np.isnan(sol.u))
 
 
+@pytest.mark.parametrize("field", ["u_min", "u_max", "band_min", "band_max"])
+def test_a_nan_or_crossed_bound_is_a_reported_failure(field):
+    # A NaN bound passes a "lower > upper" test (NaN compares false); it must fail as clearly as
+    # a crossed one, and the next good instance must solve as if nothing had happened.
+    shape, data = _random_problem(np.random.default_rng(2))
+    qp, fresh = TrackingQP(shape), TrackingQP(shape)
+    bounds = np.array(getattr(data, field), dtype=float)
+    bounds.flat[3] = np.nan
+    sol = qp.solve(dataclasses.replace(data, **{field: bounds}))
+    assert not sol.success and sol.status == "inconsistent bounds (NaN, or lower > upper)"
+    assert qp.rescues == 0  # refused before OSQP, not handed to Clarabel
+    if field.startswith("u_"):
+        crossed = dataclasses.replace(data, u_min=data.u_max + 0.1)
+        assert qp.solve(crossed).status == "inconsistent bounds (NaN, or lower > upper)"
+    np.testing.assert_array_equal(qp.solve(data).u, fresh.solve(data).u)
+
+
 @pytest.mark.parametrize("seed", [1, 2, 3])
 def test_a_qp_osqp_cannot_finish_is_rescued_by_clarabel(seed):
     # OSQP starved of iterations fails; the interior-point rescue must give the QP's solution,

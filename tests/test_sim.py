@@ -4,9 +4,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import os
-import shlex
-import shutil
 from functools import cache
 
 import casadi as ca
@@ -22,6 +19,7 @@ from racing_lib.interfaces import (
     Observation,
     Plant,
 )
+from racing_lib.jit import c_compiler
 from racing_lib.sim import SimulatedCar
 from racing_lib.vehicle import CASADI_OPS, VehicleParams, static_axle_loads
 from racing_lib.vehicle.dynamics import (
@@ -341,7 +339,7 @@ def test_the_compiled_substep_drives_the_interpreters_lap_bit_for_bit():
     compiled = SimulatedCar(stadium(boundary="walls"), start_speed=30.0)
     interpreted = SimulatedCar(stadium(boundary="walls"), start_speed=30.0, jit=False)
     assert interpreted._rk4_fn.fn.class_name() == "SXFunction"
-    if os.name == "posix" and shutil.which(shlex.split(os.environ.get("CC") or "cc")[0]):
+    if c_compiler()[0] is not None:
         assert compiled._rk4_fn.fn.class_name() == "External"
     logs = []
     for car in (compiled, interpreted):

@@ -6,6 +6,7 @@ Frenet is the identity inside the track; an arc-length parametrization has |dr/d
 
 from __future__ import annotations
 
+import copy
 import math
 import os
 from pathlib import Path as FsPath
@@ -253,12 +254,14 @@ def test_two_trackers_on_one_path_get_what_each_would_get_alone():
     # The path remembers its last projection (a lap projects each position twice onto the plan's
     # line); a tracker sharing the path must see exactly what it sees on a path of its own, and
     # a different start point must not be answered from the memory.
-    track = load_track("shortcut")
-    shared, own = track.centerline, load_track("shortcut").centerline
+    shared = load_track("shortcut").centerline
+    own = copy.deepcopy(shared)  # the same line, with a memory of its own
+    own._last_projection = (None, ())
+    assert own is not shared
     s = np.arange(0.0, 600.0, 2.5)
     x, y, _ = shared.to_cartesian(s, 1.2 * np.sin(s / 23.0))
     a, b, alone = FrenetTracker(shared), FrenetTracker(shared), FrenetTracker(own)
-    lagging = FrenetTracker(shared)  # projects every point from one step further back
+    lagging = FrenetTracker(shared)  # every second point only: it starts two points back
     for k, (xi, yi) in enumerate(zip(x.tolist(), y.tolist(), strict=True)):
         want = alone.project(xi, yi)
         assert a.project(xi, yi) == want

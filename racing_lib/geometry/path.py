@@ -183,7 +183,7 @@ class Path:
         # The last scalar projection, ((x, y, s_start), result): a closed-loop lap projects each
         # position twice onto the plan's line from the same start (the controller, then the
         # lap's log). One attribute, so that threads sharing the path read a consistent pair.
-        self._last_projection: tuple[tuple[float, float, float], tuple] = ((math.nan,) * 3, ())
+        self._last_projection: tuple[tuple[float, float, float] | None, tuple] = (None, ())
 
     # ---------------------------------------------------------------- evaluation
     @property

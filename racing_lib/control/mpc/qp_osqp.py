@@ -323,8 +323,10 @@ class TrackingQP:
         q[self._nx_tot : self._nx_tot + N * m] = qu.ravel()
         if not (np.isfinite(Ax).all() and np.isfinite(rhs).all() and np.isfinite(q).all()):
             return failed_solution(sh, "non-finite problem data")
-        if (self._l > self._u).any():
-            return failed_solution(sh, "inconsistent bounds (lower > upper)")
+        # NaN compares false both ways, so asking for l <= u everywhere also refuses a NaN bound,
+        # which the Clarabel rescue would otherwise read as no bound at all.
+        if not (self._l <= self._u).all():
+            return failed_solution(sh, "inconsistent bounds (NaN, or lower > upper)")
         tic = time.perf_counter()
         res = self._osqp_solve(Ax, q)
         iterations = int(res.info.iter)
