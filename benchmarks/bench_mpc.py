@@ -34,6 +34,7 @@ from racing_lib.experiments.configs import (
     tuned_weights,
 )
 from racing_lib.experiments.lap import run_lap
+from racing_lib.model import CarModel
 from racing_lib.model.identified import identified_params
 from racing_lib.planning.trajectory import Trajectory
 from racing_lib.sim import SimulatedCar
@@ -103,7 +104,7 @@ def start_car(track, plan) -> PlanStart:
 
 def step_timings(track, plan, params, horizon: int, n_steps: int) -> dict[str, np.ndarray]:
     """Per-part controller times (ms) over ``n_steps`` closed-loop steps."""
-    mpc = CoupledMPC(plan, params=params, track=track, settings=MPCSettings(horizon=horizon))
+    mpc = CoupledMPC(plan, CarModel(params), track=track, settings=MPCSettings(horizon=horizon))
     car = start_car(track, plan)
     obs = car.reset(seed=0)
     mpc.reset(obs)
@@ -118,7 +119,7 @@ def step_timings(track, plan, params, horizon: int, n_steps: int) -> dict[str, n
 
 def qp_timings(track, plan, params, horizon: int, n_steps: int) -> dict[str, np.ndarray]:
     """The QPs of a closed-loop run, re-solved by a fresh fast QP and by the cvxpy reference."""
-    mpc = CoupledMPC(plan, params=params, track=track, settings=MPCSettings(horizon=horizon))
+    mpc = CoupledMPC(plan, CarModel(params), track=track, settings=MPCSettings(horizon=horizon))
     car = start_car(track, plan)
     obs = car.reset(seed=0)
     mpc.reset(obs)
@@ -204,7 +205,7 @@ def main() -> None:
     track = load_track(args.track)
     centerline = make_plan(track, params, "centerline")
     # Warm up (CasADi JIT compilation happens once per process).
-    CoupledMPC(centerline, params=params, track=track)
+    CoupledMPC(centerline, CarModel(params), track=track)
     for N in args.horizons:
         print_table(
             f"controller step, N = {N} ({args.steps} steps on {track.name})",
@@ -246,7 +247,7 @@ def main() -> None:
         (
             "coupled MPC",
             lambda p: CoupledMPC(
-                p, params=params, track=track, settings=settings(p, "coupled-mpc")
+                p, CarModel(params), track=track, settings=settings(p, "coupled-mpc")
             ),
         )
     ]
@@ -256,7 +257,7 @@ def main() -> None:
                 "coupled, no smoothing",
                 lambda p: CoupledMPC(
                     p,
-                    params=params,
+                    CarModel(params),
                     track=track,
                     settings=settings(p, "coupled-mpc", smooth_transition=False),
                 ),
@@ -264,7 +265,7 @@ def main() -> None:
             (
                 "decoupled MPC",
                 lambda p: DecoupledMPC(
-                    p, params=params, track=track, settings=settings(p, "decoupled-mpc")
+                    p, CarModel(params), track=track, settings=settings(p, "decoupled-mpc")
                 ),
             ),
         ]

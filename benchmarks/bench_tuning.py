@@ -24,6 +24,7 @@ from racing_lib.experiments.tuning import (
     evaluate_weights,
     mpc_weight_space,
 )
+from racing_lib.model import CarModel
 from racing_lib.model.identified import identified_params
 from racing_lib.optim.cmaes import (
     CmaTuner,
@@ -41,7 +42,9 @@ def stadium_spec() -> LapSpec:
         boundary="walls",
         name="stadium",
     )
-    plan = Trajectory.from_centerline(track, params=identified_params().replace(mu=1.0))
+    # The MPC predicts with the identified set; the plan keeps a fifth of its grip (mu 1.0).
+    model = CarModel(identified_params(), grip_margin=0.2)
+    plan = Trajectory.from_centerline(track, model.planning_params()).with_model(model)
     return LapSpec(track=track, trajectory=plan, controller="coupled-mpc", run_up=50.0)
 
 

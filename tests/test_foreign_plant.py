@@ -159,21 +159,16 @@ def test_a_car_nobody_here_wrote_is_identified_from_its_logs(identified):
 @pytest.mark.slow
 def test_the_identified_kart_is_planned_and_driven_with_its_own_model(identified):
     track = load_track("shortcut")
-    model = identified.params
-    planned = plan(track, method="curvature", params=model)
+    model = identified.car_model()
+    planned = plan(track, "curvature", model)
     assert planned.success, planned.status
     traj = planned.trajectory
-    spec = LapSpec(
-        track=track,
-        trajectory=traj,
-        controller="coupled-mpc",
-        params=model,
-        steer_tau=identified.steer_tau,
-    )
+    spec = LapSpec(track=track, trajectory=traj, controller="coupled-mpc")
     controller = make_controller(spec)
-    # The MPC predicts with what was identified, not with the simulated car's shipped fit.
-    assert controller.params == model
-    assert controller.settings.steer_tau == pytest.approx(identified.steer_tau)
+    # The MPC predicts with what was identified (read from the plan it tracks), not with the
+    # simulated car's shipped fit.
+    assert controller.model == model and controller.params == identified.params
+    assert controller.model.steer_tau == identified.steer_tau
     s0 = (traj.path.length - 150.0) % traj.path.length
     x0, y0 = traj.path.position(s0)
     v0 = float(np.interp(s0, traj.s, traj.vx, period=traj.path.length))

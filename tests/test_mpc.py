@@ -34,7 +34,7 @@ from racing_lib.interfaces import (
     Command,
     Controller,
 )
-from racing_lib.model import NU, NX, U, X, discretize
+from racing_lib.model import NU, NX, CarModel, U, X, discretize
 
 TIGHT = QPSettings(eps_abs=1e-10, eps_rel=1e-10, max_iter=200000, polish=True)
 
@@ -226,7 +226,7 @@ def test_zoh_discretization_is_exact_for_the_linearized_model(circle_setup):
     """ZOH of the continuous linearization at an equilibrium-free point: compare with a fine
     integration of the *linear* ODE (the ZOH is exact for it)."""
     plan, params = circle_setup
-    mpc = CoupledMPC(plan, params=params, settings=MPCSettings(horizon=2, discretization="zoh"))
+    mpc = CoupledMPC(plan, CarModel(params), settings=MPCSettings(horizon=2, discretization="zoh"))
     from racing_lib.control.mpc.linearize import continuous_linearization
 
     xi_bar = np.array([20.0, -0.3, 0.25, 0.02, 0.4, 10.0])
@@ -299,7 +299,7 @@ def test_linearization_is_exact_to_first_order(circle_setup, substeps):
     """One step of the affine model vs. the model's nonlinear step: error O(|perturbation|^2)."""
     plan, params = circle_setup
     st = MPCSettings(horizon=4, substeps=substeps, jit=False)  # no compile time in tests
-    mpc = CoupledMPC(plan, params=params, settings=st)
+    mpc = CoupledMPC(plan, CarModel(params), settings=st)
     xi_bar = np.array([20.0, -0.3, 0.25, 0.02, 0.4, 10.0])
     u_bar = np.array([0.04, 0.5])
     kappa, theta = 1.0 / 80.0, 0.01
@@ -339,7 +339,7 @@ def test_heuristic_trajectory_and_reference(circle_setup):
 
     plan, params = circle_setup
     N = 10
-    mpc = CoupledMPC(plan, params=params, settings=MPCSettings(horizon=N, jit=False))
+    mpc = CoupledMPC(plan, CarModel(params), settings=MPCSettings(horizon=N, jit=False))
     s0 = 100.0
     xi_ref, u_ref, _ = mpc.reference(s0)
     # Constant 20 m/s: stage k is 2 k m further along.
@@ -374,7 +374,7 @@ def test_heuristic_trajectory_and_reference(circle_setup):
     np.testing.assert_allclose(xi_hat[-1], xi_ref[-1])  # ends on the plan
     assert xi_hat[N // 2, X.EY] == pytest.approx(0.5 * xi0[X.EY])  # halfway, half the offset
     off = CoupledMPC(
-        plan, params=params, settings=MPCSettings(horizon=N, smooth_transition=False, jit=False)
+        plan, CarModel(params), settings=MPCSettings(horizon=N, smooth_transition=False, jit=False)
     )
     assert np.all(off.blend_weights == 0.0)
     np.testing.assert_allclose(off.heuristic_trajectory(xi0, xi_ref), xi_ref)
@@ -450,7 +450,7 @@ def test_coupled_mpc_completes_laps_without_contact(setups, name, seed):
     from racing_lib.experiments.lap import run_lap
 
     track, plan, params = setups[name]
-    mpc = CoupledMPC(plan, params=params, track=track)
+    mpc = CoupledMPC(plan, CarModel(params), track=track)
     assert isinstance(mpc, Controller)
     res = run_lap(_car(track, plan), mpc, plan, track=track, seed=seed)
     m = res.metrics
@@ -488,7 +488,7 @@ def test_forced_qp_failures_fall_back_and_are_counted(setups, monkeypatch, caplo
     """Every QP from step 5 fails: N-1 shifted inputs of the last plan, then safe braking."""
     track, plan, params = setups["shortcut"]
     N = 8
-    mpc = CoupledMPC(plan, params=params, track=track, settings=MPCSettings(horizon=N))
+    mpc = CoupledMPC(plan, CarModel(params), track=track, settings=MPCSettings(horizon=N))
     car = _car(track, plan)
     obs = car.reset(seed=0)
     mpc.reset(obs)
@@ -531,7 +531,7 @@ def test_lap_goes_on_with_a_solver_that_fails_now_and_then(setups):
     from racing_lib.experiments.lap import run_lap
 
     track, plan, params = setups["shortcut"]
-    mpc = CoupledMPC(plan, params=params, track=track)
+    mpc = CoupledMPC(plan, CarModel(params), track=track)
     real_solve = mpc.qp.solve
     starved = TrackingQP(mpc.qp.shape, QPSettings(max_iter=1, rescue=False, check_termination=1))
     count = {"n": 0}
@@ -554,7 +554,7 @@ def test_decoupled_mpc_drives(setups):
     from racing_lib.experiments.lap import run_lap
 
     track, plan, params = setups["shortcut"]
-    mpc = DecoupledMPC(plan, params=params, track=track)
+    mpc = DecoupledMPC(plan, CarModel(params), track=track)
     assert isinstance(mpc, Controller)
     res = run_lap(_car(track, plan), mpc, plan, track=track, seed=0, max_time=20.0)
     travelled = np.sum(np.hypot(np.diff(res.log.x), np.diff(res.log.y)))
@@ -566,7 +566,7 @@ def test_decoupled_mpc_drives(setups):
 def test_band_comes_from_the_track_edges(setups):
     track, plan, params = setups["expressway"]
     st = MPCSettings(margin=0.4)
-    mpc = CoupledMPC(plan, params=params, track=track, settings=st)
+    mpc = CoupledMPC(plan, CarModel(params), track=track, settings=st)
     table = mpc._plan.table[:-1]
     s_c, e_c, _ = track.centerline.to_frenet(plan.x, plan.y)
     inset = 0.5 * st.car_width + st.margin
@@ -601,8 +601,8 @@ def _random_stages(n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarr
 def test_compiled_linearization_equals_the_interpreted_one(setups):
     track, plan, params = setups["shortcut"]
     N = 25
-    fast = CoupledMPC(plan, params=params, settings=MPCSettings(horizon=N, jit=True))
-    slow = CoupledMPC(plan, params=params, settings=MPCSettings(horizon=N, jit=False))
+    fast = CoupledMPC(plan, CarModel(params), settings=MPCSettings(horizon=N, jit=True))
+    slow = CoupledMPC(plan, CarModel(params), settings=MPCSettings(horizon=N, jit=False))
     xi, u, kappa, theta = _random_stages(N)
     compiled = fast.linearize(xi, u, kappa, theta)
     interpreted = slow.linearize(xi, u, kappa, theta)
@@ -753,7 +753,7 @@ def test_the_controllers_linearization_matches_the_packed_call(circle_setup):
 
     plan, params = circle_setup
     n = 6
-    ctrl = CoupledMPC(plan, params=params, settings=MPCSettings(horizon=n, jit=False))
+    ctrl = CoupledMPC(plan, CarModel(params), settings=MPCSettings(horizon=n, jit=False))
     assert ctrl.settings.discretization != "zoh"  # else A, B, d are transformed after the call
     xi, u, kappa, theta = _random_stages(n)
     A, B, d = ctrl.linearize(xi, u, kappa, theta)

@@ -4,6 +4,7 @@ would step by step, and refuses bad names with one clear error before any work."
 from __future__ import annotations
 
 import dataclasses
+import warnings
 
 import numpy as np
 import pytest
@@ -19,6 +20,8 @@ from racing_lib.experiments.pipeline import (
     RaceResult,
     race,
 )
+from racing_lib.model import CarModel, ModelOptions
+from racing_lib.planning import plan
 from racing_lib.planning.trajectory import Trajectory
 
 TRIAL_FIELDS = {
@@ -114,7 +117,9 @@ def stadium():
     )
     # A reference with grip in reserve, labelled as a time-optimal plan so that the main
     # configuration's weights apply to it.
-    reference = Trajectory.from_centerline(track, params=identified_params().replace(mu=1.0))
+    # The MPC predicts with the identified set; the plan keeps a fifth of its grip (mu 1.0).
+    model = CarModel(identified_params(), grip_margin=0.2)
+    reference = Trajectory.from_centerline(track, model.planning_params()).with_model(model)
     return track, dataclasses.replace(reference, method="time-optimal")
 
 
@@ -156,13 +161,56 @@ def test_a_plan_driven_with_other_model_effects_warns(stadium):
     from racing_lib.experiments.pipeline import ModelMismatchWarning
 
     track, reference = stadium
-    no_drag = dataclasses.replace(
-        reference, model_options={**reference.model_options, "drag": False}
-    )
+    no_drag = reference.model.replace(options=ModelOptions(drag=False))
     lines = []
-    with pytest.warns(ModelMismatchWarning, match="drag: plan False, controller True"):
-        race(track, controller="coupled-mpc", reference=no_drag, report=lines.append)
+    with pytest.warns(ModelMismatchWarning, match="drag: plan True, controller False"):
+        race(track, controller="coupled-mpc", reference=reference, model=no_drag,
+             report=lines.append)  # fmt: skip
     assert any(line.startswith("warning: the plan and the controller") for line in lines)
+    # Without a model of its own, the run drives the plan with the model the plan carries.
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", ModelMismatchWarning)
+        result = race(track, controller="coupled-mpc", reference=reference)
+    assert result.spec.model == reference.model
+
+
+def test_every_door_predicts_with_the_plans_model(stadium, tmp_path):
+    """CoupledMPC, build_controller and race all predict with the model the plan carries."""
+    from racing_lib.control import build_controller
+    from racing_lib.control.mpc import CoupledMPC
+    from racing_lib.experiments.lap import make_controller
+    from racing_lib.model import CarModel, identified_params
+
+    track, _ = stadium
+    # Not the default model in any field the MPC reads: friction, drag, steering actuator.
+    model = CarModel(
+        identified_params().replace(mu=1.05),
+        ModelOptions(drag=False),
+        steer_tau=0.1,
+        steer_rate_max=1.0,
+        grip_margin=0.1,
+    )
+    plan_result = plan(track, "centerline", model)
+    traj = plan_result.trajectory
+    assert traj.model == model
+    # The plan was made with the grip margin applied; the controller predicts without it.
+    on_the_limit = Trajectory.from_centerline(track, model.params, options=model.options)
+    assert traj.lap_time > 1.02 * on_the_limit.lap_time
+    for controller in (
+        CoupledMPC(traj, track=track),
+        build_controller("coupled-mpc", traj, track=track),
+        build_controller("decoupled-mpc", traj, track=track),
+    ):
+        assert controller.model == model and controller.params == model.params
+    result = race(track, method="centerline", controller="coupled-mpc", model=model, trials=1)
+    assert result.plan.trajectory.model == model and result.spec.model == model
+    assert make_controller(result.spec).model == model
+    # A plan saved to its file and driven from it brings the same model.
+    path = tmp_path / "plan.csv"
+    traj.save_csv(path)
+    from_file = race(track, controller="coupled-mpc", reference=path, trials=1)
+    assert from_file.spec.model == model
+    assert make_controller(from_file.spec).model == model
 
 
 # --------------------------------------------------------------------------------------------------

@@ -33,7 +33,7 @@ def _no_solve(*args, **kwargs):
         ({"spacing": 0.0}, PlanningError, "between 0.5 and 20 m"),
         ({"spacing": float("nan")}, PlanningError, "between 0.5 and 20 m"),
         ({"start": "hot"}, PlanningError, "'cold' or 'warm'"),
-        ({"grip_margin": 0.7}, PlanningError, "grip_margin"),
+        ({"model": "identified"}, PlanningError, "CarModel"),
     ],
 )
 def test_bad_arguments_are_refused_before_any_solve(track, monkeypatch, kwargs, error, says):

@@ -8,8 +8,13 @@ import numpy as np
 import pytest
 
 from racing_lib.errors import PlanningError
-from racing_lib.model import ModelOptions, ModelParams
-from racing_lib.planning.trajectory import PLAN_COLUMNS, Trajectory
+from racing_lib.model import CarModel, ModelOptions, ModelParams
+from racing_lib.planning.trajectory import (
+    PLAN_COLUMNS,
+    PLAN_FORMAT_VERSION,
+    Trajectory,
+    _plan_digest,
+)
 from racing_lib.tracks import circle_track
 
 G = 9.81
@@ -68,11 +73,49 @@ def test_plan_csv_round_trip(tmp_path, circle_plan):
     assert back.lap_time == pytest.approx(traj.lap_time, abs=1e-6)
     assert back.length == pytest.approx(traj.path.length, abs=1e-5)
     assert back.method == "centerline"
+    assert back.model == traj.model == CarModel(ModelParams(c_rr=0.0), ModelOptions(drag=False))
     assert back.model_options == {
         "drag": False,
         "longitudinal_weight_transfer": True,
         "lateral_weight_transfer": False,
     }
+
+
+def test_a_plan_file_brings_its_model_back_exactly(tmp_path, circle_plan):
+    track, traj = circle_plan
+    model = CarModel(
+        ModelParams(c_rr=0.0, mu=1.1 / 3.0),  # a float whose decimal form does not end
+        ModelOptions(drag=False),
+        steer_tau=0.0831,
+        grip_margin=0.07,
+        edge_margin=0.6,
+    )
+    path = tmp_path / "plan.csv"
+    traj.with_model(model).save_csv(path)
+    back = Trajectory.load_csv(path, track=track)
+    assert back.model == model  # every parameter bit for bit, the margins included
+    edited = tmp_path / "edited.csv"
+    edited.write_text(path.read_text().replace('"grip_margin": 0.07', '"grip_margin": 0.0'))
+    with pytest.raises(PlanningError, match="fails its checksum"):
+        Trajectory.load_csv(edited)
+
+
+def test_a_plan_file_of_the_previous_format_loads_without_a_model(tmp_path, circle_plan):
+    _, traj = circle_plan
+    path = tmp_path / "plan.csv"
+    traj.save_csv(path)
+    lines = path.read_text().splitlines()
+    body = [
+        line.replace(f"format_version: {PLAN_FORMAT_VERSION}", "format_version: 2")
+        for line in lines[:-1]
+        if not line.startswith("# model:")
+    ]
+    text = "\n".join(body)
+    old = tmp_path / "v2.csv"
+    old.write_text(text + f"\n# sha256: {_plan_digest(text)}\n")
+    back = Trajectory.load_csv(old)
+    assert back.model is None and back.model_options == {}
+    np.testing.assert_array_equal(back.vx, Trajectory.load_csv(path).vx)
 
 
 def test_plan_for_another_track_is_refused(tmp_path, circle_plan):
@@ -163,7 +206,9 @@ def test_an_old_plan_file_without_checksum_is_refused(tmp_path, circle_plan):
     good = tmp_path / "plan.csv"
     traj.save_csv(good)
     old = tmp_path / "old.csv"
-    old.write_text(good.read_text().replace("format_version: 2", "format_version: 1"))
+    old.write_text(
+        good.read_text().replace(f"format_version: {PLAN_FORMAT_VERSION}", "format_version: 1")
+    )
     with pytest.raises(PlanningError, match="older racing_lib without a checksum"):
         Trajectory.load_csv(old)
 

@@ -32,6 +32,7 @@ from racing_lib.experiments.tuning import (
     tune_weights,
     tuning_objective,
 )
+from racing_lib.model import CarModel
 from racing_lib.optim.cmaes import (
     HISTORY_FILE,
     STATE_FILE,
@@ -399,7 +400,9 @@ def stadium_spec() -> LapSpec:
         name="stadium",
     )
     # A plan with grip in reserve, as in test_mpc: the test is about tuning, not about the plan.
-    plan = Trajectory.from_centerline(track, params=identified_params().replace(mu=1.0))
+    # The MPC predicts with the identified set; the plan keeps a fifth of its grip (mu 1.0).
+    model = CarModel(identified_params(), grip_margin=0.2)
+    plan = Trajectory.from_centerline(track, model.planning_params()).with_model(model)
     return LapSpec(track=track, trajectory=plan, controller="coupled-mpc", run_up=50.0)
 
 

@@ -1,25 +1,107 @@
-"""Controllers: the nominal pure-pursuit driver and the MPCs of chapter 05."""
+"""Controllers: the nominal pure-pursuit driver and the MPCs of chapter 05.
+
+Each controller the command line and the pipeline know is described by a :class:`ControllerKind`:
+its name, what it needs (a model to predict with, MPC weights) and how fast a reference it can
+track. The pipeline asks the kind; it never tests a controller's name.
+"""
 
 from __future__ import annotations
 
-from typing import Any
+import dataclasses
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
 
+from racing_lib.control.mpc import CoupledMPC, DecoupledMPC, MPCSettings
+from racing_lib.control.nominal import MODERATE_SPEED_SCALE, NominalController
 from racing_lib.errors import ControlError
+from racing_lib.geometry import Track
 from racing_lib.interfaces import Controller
+from racing_lib.model import CarModel
+from racing_lib.planning.trajectory import Trajectory
 
-CONTROLLER_NAMES = ("nominal", "coupled-mpc", "decoupled-mpc")
+
+@dataclass(frozen=True)
+class ControllerKind:
+    """What the pipeline needs to know of a controller, so that it never asks for its name.
+
+    Attributes
+    ----------
+    name : str
+        The name on the command line and in :func:`build_controller`.
+    predicts : bool
+        It predicts with a model (the plan's :class:`~racing_lib.model.CarModel`), so a plan made
+        with another model is a mismatch worth a warning.
+    takes_weights : bool
+        It has MPC weights (tuned ones are looked up for it).
+    speed_scale : float
+        Share of the plan's speed it is asked to track (dimensionless): the pure-pursuit driver
+        has no model of grip, so it drives the plan more slowly.
+    """
+
+    name: str
+    predicts: bool
+    takes_weights: bool
+    speed_scale: float = 1.0
+
+    def reference(self, plan: Trajectory) -> Trajectory:
+        """The reference this controller tracks for ``plan`` (a slower copy, if it must)."""
+        return plan if self.speed_scale == 1.0 else plan.scale_speed(self.speed_scale)
+
+
+#: The controllers by name, in the order the command line lists them.
+CONTROLLERS: dict[str, ControllerKind] = {
+    kind.name: kind
+    for kind in (
+        ControllerKind(
+            "nominal", predicts=False, takes_weights=False, speed_scale=MODERATE_SPEED_SCALE
+        ),  # fmt: skip
+        ControllerKind("coupled-mpc", predicts=True, takes_weights=True),
+        ControllerKind("decoupled-mpc", predicts=True, takes_weights=True),
+    )
+}
+CONTROLLER_NAMES = tuple(CONTROLLERS)
+
+_MPCS: dict[str, Callable[..., Controller]] = {
+    "coupled-mpc": CoupledMPC,
+    "decoupled-mpc": DecoupledMPC,
+}
+
+
+def controller_kind(name: str) -> ControllerKind:
+    """The :class:`ControllerKind` called ``name``; an unknown name raises :class:`ControlError`."""
+    kind = CONTROLLERS.get(name) if isinstance(name, str) else None
+    if kind is None:
+        raise ControlError(
+            f"unknown controller {name!r}; choose one of {', '.join(CONTROLLER_NAMES)}."
+        )
+    return kind
+
+
+def mpc_settings(
+    weights: Mapping[str, float] | None = None, smooth_transition: bool = True
+) -> MPCSettings:
+    """MPC settings with ``weights`` (fields of :class:`MPCSettings`) over the defaults."""
+    settings = MPCSettings(smooth_transition=smooth_transition)
+    if not weights:
+        return settings
+    known = {f.name for f in dataclasses.fields(MPCSettings)}
+    unknown = sorted(set(weights) - known)
+    if unknown:
+        raise ControlError(
+            f"unknown MPC weight(s) {unknown}; valid names are the fields of MPCSettings "
+            "such as w_vx, w_vy, w_r, w_epsi, w_ey, w_ddelta."
+        )
+    return dataclasses.replace(settings, **weights)
 
 
 def build_controller(
     name: str,
-    trajectory: Any,
+    trajectory: Trajectory,
     *,
-    track: Any = None,
-    options: Any = None,
-    weights: dict[str, float] | None = None,
+    track: Track | None = None,
+    model: CarModel | None = None,
+    weights: Mapping[str, float] | None = None,
     smooth_transition: bool = True,
-    params: Any = None,
-    steer_tau: float | None = None,
 ) -> Controller:
     """Build a controller by its command-line name for a planned trajectory.
 
@@ -28,50 +110,30 @@ def build_controller(
     name : str
         One of :data:`CONTROLLER_NAMES`.
     trajectory : Trajectory
-        The plan to track.
+        The reference to track (for the nominal controller, already slowed by its kind's
+        ``speed_scale``: see :meth:`ControllerKind.reference`).
     track : Track, optional
         The track (the MPCs derive their lateral bounds from its edges).
-    options : ModelOptions, optional
-        Model effects the MPCs predict with.
+    model : CarModel, optional
+        The model the MPCs predict with. Default: the one the trajectory carries, the model it
+        was planned with, so that plan and controller agree.
     weights : dict, optional
         MPC weights overriding the defaults.
     smooth_transition : bool
         MPC: blend the linearization trajectory from the current state to the plan.
-    params : ModelParams, optional
-        The model the MPCs predict with: the one the plan was made with, so that plan and
-        controller agree (default: the identified set,
-        :func:`racing_lib.model.identified.identified_params`).
-    steer_tau : float, optional
-        Time constant of the car's steering lag the MPCs compensate, s (default:
-        ``MPCSettings.steer_tau``); pass the identified one for a car identified from its logs.
     """
-    if name == "nominal":
-        from racing_lib.control.nominal import NominalController
-
+    kind = controller_kind(name)
+    if not kind.predicts:
         return NominalController.from_trajectory(trajectory)
-    if name in ("coupled-mpc", "decoupled-mpc"):
-        import dataclasses
-
-        from racing_lib.control.mpc import CoupledMPC, DecoupledMPC, MPCSettings
-        from racing_lib.model.identified import identified_params
-
-        settings = MPCSettings(smooth_transition=smooth_transition)
-        if steer_tau is not None:
-            settings = dataclasses.replace(settings, steer_tau=float(steer_tau))
-        if weights:
-            known = {f.name for f in dataclasses.fields(MPCSettings)}
-            unknown = sorted(set(weights) - known)
-            if unknown:
-                raise ControlError(
-                    f"unknown MPC weight(s) {unknown}; valid names are the fields of MPCSettings "
-                    "such as w_vx, w_vy, w_r, w_epsi, w_ey, w_ddelta."
-                )
-            settings = dataclasses.replace(settings, **weights)
-        cls = CoupledMPC if name == "coupled-mpc" else DecoupledMPC
-        # By default the controllers predict with the model identified from driving data (ch. 02).
-        model = identified_params() if params is None else params
-        return cls(trajectory, params=model, options=options, track=track, settings=settings)
-    raise ControlError(f"unknown controller {name!r}; choose one of {', '.join(CONTROLLER_NAMES)}.")
+    settings = mpc_settings(weights, smooth_transition)
+    return _MPCS[kind.name](trajectory, model, track=track, settings=settings)
 
 
-__all__ = ["CONTROLLER_NAMES", "build_controller"]
+__all__ = [
+    "CONTROLLERS",
+    "CONTROLLER_NAMES",
+    "ControllerKind",
+    "build_controller",
+    "controller_kind",
+    "mpc_settings",
+]

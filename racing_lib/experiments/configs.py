@@ -17,19 +17,24 @@ from typing import Any
 import numpy as np
 
 from racing_lib.errors import ControlError
+from racing_lib.experiments.lap import LapSpec
 from racing_lib.experiments.tuning import (
     evaluate_weights,
     mpc_weight_space,
     seed_tuple,
     tune_weights,
 )
+from racing_lib.geometry import Track
 from racing_lib.io import atomic_write_json, data_file, jsonable
+from racing_lib.model import CarModel, ModelOptions, identified_model
 from racing_lib.optim.cmaes import TuningResult, TuningSettings
+from racing_lib.planning import PlanResult, Trajectory, plan
 
 __all__ = [
     "TUNED_FILE_FORMAT",
     "TUNED_WEIGHTS_FILE",
     "TUNING_CONFIGS",
+    "config_model",
     "config_plan",
     "configuration_name",
     "config_spec",
@@ -193,7 +198,25 @@ def _config(config: str) -> dict[str, Any]:
     return TUNING_CONFIGS[config]
 
 
-def config_plan(config: str, track: Any, params: Any = None, **plan_kwargs: Any) -> Any:
+def config_model(config: str, model: CarModel | None = None) -> CarModel:
+    """The model of a configuration of :data:`TUNING_CONFIGS`: ``model`` with its effects.
+
+    Parameters
+    ----------
+    config : str
+        A name of :data:`TUNING_CONFIGS`.
+    model : CarModel, optional
+        The model to start from (default: :func:`racing_lib.model.identified_model`); the
+        configuration sets its options (the paper's model ablations) and nothing else.
+    """
+    cfg = _config(config)
+    base = identified_model() if model is None else model
+    return base.replace(options=ModelOptions(**cfg["options"]))
+
+
+def config_plan(
+    config: str, track: Track, model: CarModel | None = None, **plan_kwargs: Any
+) -> PlanResult:
     """The plan of a configuration of :data:`TUNING_CONFIGS`: its method and model options.
 
     About 20 s for the time-optimal planner on the expressway.
@@ -204,9 +227,9 @@ def config_plan(config: str, track: Any, params: Any = None, **plan_kwargs: Any)
         A name of :data:`TUNING_CONFIGS`.
     track : Track
         The track.
-    params : ModelParams, optional
-        Planning parameters (default: the identified set,
-        ``racing_lib.model.identified.identified_params``).
+    model : CarModel, optional
+        The model to plan with, before the configuration sets its options (default:
+        :func:`racing_lib.model.identified_model`); see :func:`config_model`.
     **plan_kwargs
         Passed on to :func:`racing_lib.planning.plan`.
 
@@ -220,15 +243,8 @@ def config_plan(config: str, track: Any, params: Any = None, **plan_kwargs: Any)
     ControlError
         Unknown configuration, or a plan that did not converge.
     """
-    from racing_lib.model import ModelOptions
-    from racing_lib.model.identified import identified_params
-    from racing_lib.planning import plan
-
     cfg = _config(config)
-    if params is None:
-        params = identified_params()
-    options = ModelOptions(**cfg["options"])
-    planned = plan(track, method=cfg["method"], params=params, options=options, **plan_kwargs)
+    planned = plan(track, cfg["method"], config_model(config, model), **plan_kwargs)
     if not planned.success:
         raise ControlError(
             f"the {cfg['method']} plan of configuration {config!r} failed ({planned.status}); "
@@ -239,13 +255,13 @@ def config_plan(config: str, track: Any, params: Any = None, **plan_kwargs: Any)
 
 def config_spec(
     config: str,
-    track: Any,
-    params: Any = None,
+    track: Track,
+    model: CarModel | None = None,
     *,
-    trajectory: Any = None,
+    trajectory: Trajectory | None = None,
     weights: dict[str, float] | None = None,
     **plan_kwargs: Any,
-) -> Any:
+) -> LapSpec:
     """The :class:`~racing_lib.experiments.lap.LapSpec` of a configuration.
 
     The :class:`~racing_lib.experiments.lap.LapSpec` of a configuration of
@@ -259,9 +275,9 @@ def config_spec(
         A name of :data:`TUNING_CONFIGS`.
     track : Track
         The track.
-    params : ModelParams, optional
-        Planning parameters, which the spec's MPC then predicts with too (default: the identified
-        set, ``racing_lib.model.identified.identified_params``).
+    model : CarModel, optional
+        The model to plan with, which the spec's MPC then predicts with too, before the
+        configuration sets its options (default: :func:`racing_lib.model.identified_model`).
     trajectory : Trajectory, optional
         A plan already made for this configuration (for example loaded from a cache): no planning.
     weights : dict, optional
@@ -269,20 +285,16 @@ def config_spec(
     **plan_kwargs
         Passed on to :func:`racing_lib.planning.plan`.
     """
-    from racing_lib.experiments.lap import LapSpec
-    from racing_lib.model import ModelOptions
-
     cfg = _config(config)
     if trajectory is None:
-        trajectory = config_plan(config, track, params, **plan_kwargs).trajectory
+        trajectory = config_plan(config, track, model, **plan_kwargs).trajectory
     return LapSpec(
         track=track,
         trajectory=trajectory,
         controller=cfg["controller"],
         smooth_transition=bool(cfg.get("smooth_transition", True)),
-        options=ModelOptions(**cfg["options"]),
         weights=weights,
-        params=params,  # the plan's parameters travel to the controller (None: identified)
+        model=config_model(config, model),
     )
 
 
@@ -388,8 +400,7 @@ def generate_tuned_weights(
                 "planned_lap_time_s": float(specs[0].trajectory.lap_time)
                 if len(specs) == 1
                 else [float(one.trajectory.lap_time) for one in specs],
-                "model_params": "identified",
-                "options": TUNING_CONFIGS[name]["options"],
+                "model": specs[0].model.to_dict(),
                 "controller": specs[0].controller,
                 "smooth_transition": specs[0].smooth_transition,
                 "seeds": list(seed_tuple(seeds)),

@@ -37,6 +37,9 @@ from racing_lib.interfaces import (
     Plant,
 )
 from racing_lib.io import atomic_write_bytes
+from racing_lib.model import CarModel
+from racing_lib.planning import Trajectory
+from racing_lib.vehicle import VehicleParams
 
 
 class Reference(Protocol):
@@ -426,31 +429,25 @@ class LapSpec:
     smooth_transition : bool
         MPC only: linearize along the smoothly blended heuristic trajectory (the paper's choice)
         instead of the reference itself.
-    options : ModelOptions or None
-        Model effects the MPC predicts with (defaults: drag and longitudinal weight transfer).
     weights : dict or None
         MPC weights overriding the defaults (for example tuned ones).
     run_up : float
         The car starts this far before the start/finish line, on the plan, at its speed, m.
     vehicle : VehicleParams or None
         The simulated car's true parameters (default car when None).
-    params : ModelParams or None
-        The model the plan was made with, which the MPC then predicts with (None: the identified
-        set, :func:`racing_lib.model.identified.identified_params`).
-    steer_tau : float or None
-        Steering lag the MPC compensates, s (None: ``MPCSettings.steer_tau``).
+    model : CarModel or None
+        The model the MPC predicts with; None: the one the trajectory carries (the model it was
+        planned with).
     """
 
     track: Track
-    trajectory: Any
+    trajectory: Trajectory
     controller: str = "nominal"
     smooth_transition: bool = True
-    options: Any = None
     weights: dict[str, float] | None = None
     run_up: float = 150.0
-    vehicle: Any = None
-    params: Any = None
-    steer_tau: float | None = None
+    vehicle: VehicleParams | None = None
+    model: CarModel | None = None
 
 
 class _StartOnPlan:
@@ -495,11 +492,9 @@ def make_controller(spec: LapSpec) -> Controller:
         spec.controller,
         spec.trajectory,
         track=spec.track,
-        options=spec.options,
+        model=spec.model,
         weights=spec.weights,
         smooth_transition=spec.smooth_transition,
-        params=spec.params,
-        steer_tau=spec.steer_tau,
     )
 
 

@@ -26,6 +26,7 @@ A quick one (a few seconds):
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 import warnings
@@ -36,7 +37,9 @@ from typing import Any
 
 import numpy as np
 
+from racing_lib.control import ControllerKind, controller_kind
 from racing_lib.errors import ArgumentError, ControlError, checked_arguments
+from racing_lib.experiments.configs import configuration_name, tuned_weights
 from racing_lib.experiments.lap import (
     LapMetrics,
     LapResult,
@@ -45,6 +48,7 @@ from racing_lib.experiments.lap import (
     summarize,
 )
 from racing_lib.geometry import Track
+from racing_lib.model import CarModel, ModelOptions, identified_model
 from racing_lib.planning import PlanResult, Trajectory, plan
 from racing_lib.tracks import load_track
 
@@ -63,7 +67,7 @@ class RaceResult:
     plan : PlanResult or None
         The planner's result; None when a ready-made reference was given to :func:`race`.
     spec : LapSpec
-        The lap as driven (track, reference, controller, weights, options); pass it to
+        The lap as driven (track, reference, controller, weights, model); pass it to
         :func:`racing_lib.experiments.lap.drive_lap` to drive it again.
     laps : list of LapResult
         One lap per seed, in the order of :attr:`seeds`.
@@ -213,20 +217,15 @@ class RaceResult:
 
 def _resolve_weights(
     weights: str | Mapping[str, float] | None,
-    controller: str,
+    kind: ControllerKind,
     method: str,
-    options: Any,
+    model: CarModel,
     smooth_transition: bool,
 ) -> tuple[dict[str, float] | None, str, str | None]:
     """The MPC weights to drive with, a description of where they came from, and the config."""
-    from racing_lib.experiments.configs import (
-        configuration_name,
-        tuned_weights,
-    )
-
-    config = configuration_name(controller, method, options, smooth_transition)
-    if controller == "nominal":
-        return None, "not used (the nominal controller has gains)", config
+    config = configuration_name(kind.name, method, model.options, smooth_transition)
+    if not kind.takes_weights:
+        return None, f"not used (the {kind.name} controller has no MPC weights)", config
     if weights is None or weights == "default":
         return None, "defaults", config
     if weights == "tuned":
@@ -239,14 +238,18 @@ def _resolve_weights(
 
 
 def _check_choices(
-    controller: str, weights: str | Mapping[str, float] | None, trials: int, seed: int
-) -> None:
+    controller: str,
+    weights: str | Mapping[str, float] | None,
+    model: CarModel | None,
+    trials: int,
+    seed: int,
+) -> ControllerKind:
     """Refuse bad names and numbers before any planning (which can take tens of seconds)."""
-    from racing_lib.control import CONTROLLER_NAMES
-
-    if controller not in CONTROLLER_NAMES:
-        raise ControlError(
-            f"unknown controller {controller!r}; choose one of {', '.join(CONTROLLER_NAMES)}."
+    kind = controller_kind(controller)
+    if model is not None and not isinstance(model, CarModel):
+        raise ArgumentError(
+            f"model must be a racing_lib.model.CarModel, got {type(model).__name__}; for "
+            "parameters alone use CarModel(params)."
         )
     if isinstance(weights, str) and weights not in WEIGHT_CHOICES:
         raise ControlError(
@@ -257,9 +260,10 @@ def _check_choices(
         raise ControlError(
             f"weights must be 'tuned', 'default', None or a dict, got {type(weights).__name__}."
         )
-    if isinstance(weights, Mapping) and controller == "nominal":
+    if isinstance(weights, Mapping) and not kind.takes_weights:
         raise ControlError(
-            "the nominal controller takes no MPC weights; drop weights= or use an MPC controller."
+            f"the {kind.name} controller takes no MPC weights; drop weights= or use an MPC "
+            "controller."
         )
     if isinstance(trials, bool) or not isinstance(trials, Integral) or trials < 1:
         raise ArgumentError(f"trials must be a whole number of at least 1, got {trials!r}.")
@@ -267,28 +271,43 @@ def _check_choices(
         raise ArgumentError(
             f"seed must be a whole number >= 0 (NumPy seeds cannot be negative), got {seed!r}."
         )
+    return kind
 
 
-def _check_plan_matches(trajectory: Trajectory, options: Any, say: Callable[[str], None]) -> None:
-    """Warn when a plan was made with other model effects than the controller will predict with.
+def _model_differences(planned: CarModel, used: CarModel) -> list[str]:
+    """The fields in which two models differ, as ``name: plan X, controller Y`` texts."""
+    out = []
+    pairs = [(f.name, planned.options, used.options) for f in dataclasses.fields(ModelOptions)]
+    pairs += [(name, planned, used) for name in ("steer_tau", "steer_max", "steer_rate_max")]
+    for name, a, b in pairs:
+        if getattr(a, name) != getattr(b, name):
+            out.append(f"{name}: plan {getattr(a, name)}, controller {getattr(b, name)}")
+    pa, pb = planned.params.to_dict(), used.params.to_dict()
+    changed = sorted(k for k in pa if pa[k] != pb[k])
+    if changed:
+        out.append(f"parameters {', '.join(changed)}")
+    return out
+
+
+def _check_plan_matches(
+    trajectory: Trajectory, model: CarModel, say: Callable[[str], None]
+) -> None:
+    """Warn when a plan was made with another model than the controller will predict with.
 
     A plan made without drag, driven by an MPC that models drag, asks for speeds the controller's
     model says cost more power than the plan budgeted; the lap still runs, but the gap to the plan
-    then measures the mismatch as much as the controller.
+    then measures the mismatch as much as the controller. (The margins are the planner's: they
+    do not enter the controller's prediction.)
     """
-    from racing_lib.model import ModelOptions
-    from racing_lib.planning.trajectory import options_to_dict
-
-    planned = trajectory.model_options
-    used = options_to_dict(options if options is not None else ModelOptions())
-    differ = sorted(k for k in planned if k in used and planned[k] != used[k])
+    if trajectory.model is None:
+        return
+    differ = _model_differences(trajectory.model, model)
     if not differ:
         return
-    what = ", ".join(f"{k}: plan {planned[k]}, controller {used[k]}" for k in differ)
     message = (
-        f"the plan and the controller use different model effects ({what}); pass the same "
-        "options as the plan (on the command line, the same --no-drag / --no-weight-transfer / "
-        "--lateral-weight-transfer flags) to drive the plan with the model it was made with."
+        f"the plan and the controller use different models ({'; '.join(differ)}); drive the "
+        "plan with the model it carries (omit model=, or on the command line the model flags) "
+        "or re-plan with the controller's model."
     )
     warnings.warn(message, ModelMismatchWarning, stacklevel=3)
     say(f"warning: {message}")
@@ -311,7 +330,7 @@ def race(
     weights: str | Mapping[str, float] | None = "tuned",
     *,
     trials: int = 1,
-    options: Any = None,
+    model: CarModel | None = None,
     smooth_transition: bool = True,
     reference: Trajectory | str | os.PathLike[str] | None = None,
     plan_kwargs: Mapping[str, Any] | None = None,
@@ -333,8 +352,8 @@ def race(
         The planner (:func:`racing_lib.planning.plan`); ignored when ``reference`` is given.
     controller : {'coupled-mpc', 'decoupled-mpc', 'nominal'}
         The tracking controller. The nominal (pure-pursuit) driver has no model of grip: as on the
-        command line, it tracks the plan at
-        :data:`~racing_lib.control.nominal.MODERATE_SPEED_SCALE` of its speed.
+        command line, it tracks the plan at its kind's
+        :attr:`~racing_lib.control.ControllerKind.speed_scale` of its speed.
     seed : int
         Seed of the first lap's randomness (friction variation, actuation noise); lap ``i`` of
         ``trials`` uses ``seed + i``.
@@ -346,17 +365,19 @@ def race(
         ``w_ey``): those weights.
     trials : int
         Number of seeded laps.
-    options : ModelOptions, optional
-        Model effects of the planner and of the MPC's prediction (default: drag and longitudinal
-        weight transfer, as in the paper's main experiment).
+    model : CarModel, optional
+        The model of the planner and of the MPC's prediction: parameters, effects, steering
+        actuator and margins. Default: the plan's own model when a ``reference`` carries one,
+        else :func:`racing_lib.model.identified_model` (the shipped fit, drag and longitudinal
+        weight transfer as in the paper's main experiment, a 5 % grip margin).
     smooth_transition : bool
         MPC: linearize along the blend from the measured state to the plan (the paper's choice).
     reference : Trajectory or path, optional
         A plan made before (a :class:`~racing_lib.planning.Trajectory` or a plan CSV written by
         ``racing-lib plan --out``); the planning step is then skipped.
     plan_kwargs : dict, optional
-        More arguments of :func:`racing_lib.planning.plan` (``params``, ``spacing``, ``start``,
-        solver settings).
+        More arguments of :func:`racing_lib.planning.plan` (``spacing``, ``start``, solver
+        settings).
     progress : bool
         Show a progress bar over each lap.
     report : callable, optional
@@ -385,53 +406,50 @@ def race(
     Warns
     -----
     ModelMismatchWarning
-        A ``reference`` plan was made with other model options than ``options``.
+        A ``reference`` plan was made with another model than ``model``.
     """
     say = report or (lambda _line: None)
-    _check_choices(controller, weights, trials, seed)
+    kind = _check_choices(controller, weights, model, trials, seed)
     trk = load_track(track)  # a Track is returned as it is; None or a number is refused
 
     planned: PlanResult | None = None
     if reference is None:
+        model = model if model is not None else identified_model()
         say(f"planning {trk.name} ({trk.length:.0f} m) with method '{method}' ...")
-        planned = plan(trk, method=method, options=options, **dict(plan_kwargs or {}))
+        planned = plan(trk, method, model, **dict(plan_kwargs or {}))
         trajectory = planned.trajectory
         plan_method = planned.method
         say(f"planned lap time {trajectory.lap_time:.2f} s ({planned.status})")
-    elif isinstance(reference, Trajectory):
-        trajectory, plan_method = reference, reference.method or method
     else:
-        trajectory = Trajectory.load_csv(os.fspath(reference), track=trk)
+        if isinstance(reference, Trajectory):
+            trajectory = reference
+        else:
+            trajectory = Trajectory.load_csv(os.fspath(reference), track=trk)
+            say(f"loaded plan {os.fspath(reference)} (planned lap {trajectory.lap_time:.2f} s)")
         plan_method = trajectory.method or method
-        say(f"loaded plan {os.fspath(reference)} (planned lap {trajectory.lap_time:.2f} s)")
+        if model is None:
+            model = trajectory.model if trajectory.model is not None else identified_model()
+        elif kind.predicts:
+            _check_plan_matches(trajectory, model, say)
 
-    if reference is not None and controller != "nominal":
-        _check_plan_matches(trajectory, options, say)
-
-    if controller == "nominal":
-        from racing_lib.control.nominal import MODERATE_SPEED_SCALE
-
-        # Pure pursuit has no model of grip: it drives the plan at a moderate fraction of its speed.
-        trajectory = trajectory.scale_speed(MODERATE_SPEED_SCALE)
+    reference_tracked = kind.reference(trajectory)
+    if reference_tracked is not trajectory:
         say(
-            f"nominal controller: reference at {MODERATE_SPEED_SCALE:.0%} of the planned speed "
-            f"({trajectory.lap_time:.2f} s)"
+            f"{kind.name} controller: reference at {kind.speed_scale:.0%} of the planned speed "
+            f"({reference_tracked.lap_time:.2f} s)"
         )
-
     lap_weights, source, config = _resolve_weights(
-        weights, controller, plan_method, options, smooth_transition
+        weights, kind, plan_method, model, smooth_transition
     )
-    if controller != "nominal":
+    if kind.takes_weights:
         say(f"MPC weights: {source}")
     spec = LapSpec(
         track=trk,
-        trajectory=trajectory,
-        controller=controller,
+        trajectory=reference_tracked,
+        controller=kind.name,
         smooth_transition=smooth_transition,
-        options=options,
         weights=lap_weights,
-        # The MPC predicts with the parameters the plan was made with (None: the identified set).
-        params=dict(plan_kwargs or {}).get("params") if reference is None else None,
+        model=model,
     )
     laps = []
     for i in range(int(trials)):

@@ -19,6 +19,7 @@ from pathlib import Path as FilePath
 from typing import Any
 
 from racing_lib.errors import RacingLibError
+from racing_lib.model import CarModel
 from racing_lib.planning import METHODS, STARTS
 
 DEFAULT_TRACK = "expressway"
@@ -93,14 +94,22 @@ def cmd_tracks(args: argparse.Namespace) -> int:
 # plan and lap share the way a plan is obtained
 
 
-def _model_options(args: argparse.Namespace):
-    from racing_lib.model import ModelOptions
+def _model(args: argparse.Namespace) -> CarModel | None:
+    """The model of the run: the default one with the effects on the command line.
 
-    return ModelOptions(
+    None when a plan file is driven and no model flag is given: the plan's own model is then
+    used, the one it was made with.
+    """
+    from racing_lib.model import ModelOptions, identified_model
+
+    options = ModelOptions(
         drag=not args.no_drag,
         longitudinal_weight_transfer=not args.no_weight_transfer,
         lateral_weight_transfer=args.lateral_weight_transfer,
     )
+    if getattr(args, "plan", None) and options == ModelOptions():
+        return None
+    return identified_model().replace(options=options)
 
 
 def _plan_kwargs(args: argparse.Namespace) -> dict[str, Any]:
@@ -121,7 +130,7 @@ def _make_plan(args: argparse.Namespace, track):
     """Plan ``track`` with the method, model options and knobs on the command line."""
     from racing_lib.planning import plan
 
-    return plan(track, method=args.method, options=_model_options(args), **_plan_kwargs(args))
+    return plan(track, args.method, _model(args), **_plan_kwargs(args))
 
 
 def cmd_plan(args: argparse.Namespace) -> int:
@@ -166,7 +175,7 @@ def cmd_lap(args: argparse.Namespace) -> int:
         controller=args.controller,
         seed=args.seed,
         trials=args.trials,
-        options=_model_options(args),
+        model=_model(args),
         smooth_transition=not args.no_smooth_transition,
         reference=args.plan,
         progress=not args.json and args.trials == 1,

@@ -6,7 +6,10 @@
   time and the spatial domain, their Jacobians and discretizations.
 * :mod:`racing_lib.model.params`: :class:`ModelParams`, :class:`ModelOptions`, :class:`PedalMap`.
 * :mod:`racing_lib.model.numeric`: :class:`Model`, the same equations for NumPy users.
-* :mod:`racing_lib.model.identified`: the shipped identified parameters (chapter 02's fit).
+* :mod:`racing_lib.model.car_model`: :class:`CarModel`, what predicts the car (parameters,
+  options, steering actuator, margins), the object that travels with a plan to the MPC.
+* :mod:`racing_lib.model.identified`: the shipped identified parameters (chapter 02's fit) and the
+  default model of every run, :func:`identified_model`.
 * :mod:`racing_lib.model.actuator`: the steering lag the model leaves out.
 * :mod:`racing_lib.model.analysis`: linear analysis and open-loop prediction errors.
 
@@ -14,6 +17,7 @@ The names below are re-exported, so ``from racing_lib.model import ModelParams, 
 Taught in notebook 02.
 """
 
+from racing_lib.model.car_model import CarModel
 from racing_lib.model.equations import (
     VX_GUARD,
     discrete_dynamics,
@@ -25,13 +29,20 @@ from racing_lib.model.equations import (
     spatial_dynamics,
     time_dynamics,
 )
-from racing_lib.model.identified import identified_params, identified_steer_tau
+from racing_lib.model.identified import (
+    GRIP_MARGIN,
+    identified_model,
+    identified_params,
+    identified_steer_tau,
+)
 from racing_lib.model.numeric import Model
 from racing_lib.model.params import BRAKE_KNEE, ModelOptions, ModelParams, PedalMap
 from racing_lib.model.states import NU, NX, U, X
 
 __all__ = [
     "BRAKE_KNEE",
+    "GRIP_MARGIN",
+    "CarModel",
     "NU",
     "NX",
     "VX_GUARD",
@@ -45,6 +56,7 @@ __all__ = [
     "discrete_linearization",
     "discretize",
     "frenet_kinematics",
+    "identified_model",
     "identified_params",
     "identified_steer_tau",
     "jacobians",

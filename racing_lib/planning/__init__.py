@@ -17,13 +17,17 @@ Examples
 
 from __future__ import annotations
 
+import dataclasses
 import time
 import warnings
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import Any, TypeVar
 
 from racing_lib.errors import PlanningError, checked_arguments
+from racing_lib.geometry import Track
+from racing_lib.model.car_model import CarModel
+from racing_lib.model.identified import GRIP_MARGIN, identified_model
 from racing_lib.planning.curvature import (
     CurvatureResult,
     CurvatureSettings,
@@ -40,18 +44,7 @@ from racing_lib.planning.time_optimal import (
 )
 from racing_lib.planning.trajectory import Trajectory
 
-if TYPE_CHECKING:
-    from racing_lib.model.params import ModelParams
-
 METHODS = ("centerline", "curvature", "time-optimal")
-
-#: Share of the tyres' identified friction a plan leaves unused (dimensionless). A plan on the
-#: model's limit asks the simulated car for grip it has only in pure slip: its tyres lose lateral
-#: grip under braking (ABS) and to the load transfer, which the planning model knows nothing of.
-#: Measured on the expressway with the coupled MPC (default weights, two seeds): planned on the
-#: limit, the car drove 2.5 % over its plan and touched a wall; with 5 % kept, 0.8 % over and
-#: clean, and the driven lap was 0.8 s faster.
-GRIP_MARGIN = 0.05
 #: Above this many nodes a plan warns of its size before it starts (18 km at the 3 m spacing).
 LARGE_PLAN_NODES = 6000
 #: Rough cost of the time-optimal NLP per node, measured on two cores: seconds and megabytes.
@@ -113,7 +106,7 @@ class PlanResult:
         }
 
 
-def _warn_if_large(track: Any, method: str, spacing: float, say: Callable[[str], None]) -> None:
+def _warn_if_large(track: Track, method: str, spacing: float, say: Callable[[str], None]) -> None:
     """Warn before a plan that will take minutes and gigabytes, with the way to shrink it."""
     nodes = int(track.length / spacing)
     if nodes <= LARGE_PLAN_NODES or method == "centerline":
@@ -131,14 +124,12 @@ def _warn_if_large(track: Any, method: str, spacing: float, say: Callable[[str],
 
 @checked_arguments
 def plan(
-    track: Any,
+    track: Track,
     method: str = "time-optimal",
-    params: ModelParams | None = None,
-    options: Any = None,
+    model: CarModel | None = None,
     *,
     spacing: float = 3.0,
     start: str = DEFAULT_START,
-    grip_margin: float = GRIP_MARGIN,
     curvature_settings: CurvatureSettings | None = None,
     time_optimal_settings: TimeOptimalSettings | None = None,
     report: Callable[[str], None] | None = None,
@@ -152,21 +143,19 @@ def plan(
     method : {'centerline', 'curvature', 'time-optimal'}
         ``centerline``: the centerline at its speed profile; ``curvature``: the iterated
         curvature-optimal QP; ``time-optimal``: the minimum-lap-time NLP.
-    params : ModelParams, optional
-        Planning model parameters (default: the identified set,
-        :func:`racing_lib.model.identified.identified_params`).
-    options : ModelOptions, optional
-        Model effects (default ``ModelOptions()``).
+    model : CarModel, optional
+        The model to plan with: parameters, effects and margins (default:
+        :func:`racing_lib.model.identified.identified_model`, the shipped fit with a grip margin
+        of :data:`~racing_lib.model.identified.GRIP_MARGIN`). The planner sees the parameters
+        with the grip margin applied (:meth:`CarModel.planning_params`) and keeps the model's
+        edge margin, when it has one; the plan carries the model, so an MPC that tracks it
+        predicts with the same one.
     spacing : float
         Node spacing along the centerline, m (overrides the settings' spacing).
     start : {'cold', 'warm'}
         Start of the time-optimal NLP: ``'cold'`` (default, :data:`DEFAULT_START`), the
         centerline at 10 m/s; ``'warm'``, the curvature QP's plan first (the paper's two-stage
         planner). Both reach the same lap; the cold start is faster, as it skips the QP.
-    grip_margin : float
-        Share of the friction coefficient the plan leaves unused, in [0, 0.5) (default
-        :data:`GRIP_MARGIN`): the planner sees ``mu (1 - grip_margin)``. 0 plans on the model's
-        limit.
     curvature_settings, time_optimal_settings : optional
         Planner settings.
     report : callable, optional
@@ -188,10 +177,6 @@ def plan(
         More than :data:`LARGE_PLAN_NODES` nodes: the estimated time and memory, and the way to
         make the plan smaller (a larger ``spacing``).
     """
-    import dataclasses
-
-    from racing_lib.geometry import Track
-
     t0 = time.perf_counter()
     if not isinstance(track, Track):
         raise PlanningError(
@@ -210,30 +195,34 @@ def plan(
         key = "time-optimal"
     if key not in METHODS:
         raise PlanningError(f"unknown planning method {method!r}; use one of {', '.join(METHODS)}.")
-    if not 0.0 <= grip_margin < 0.5:
+    if model is None:
+        model = identified_model()
+    elif not isinstance(model, CarModel):
         raise PlanningError(
-            f"grip_margin must be in [0, 0.5) (a share of the friction), got {grip_margin!r}."
+            f"model must be a racing_lib.model.CarModel, got {type(model).__name__}; for "
+            "parameters alone use CarModel(params) (racing_lib.model)."
         )
     say = report or (lambda _line: None)
     _warn_if_large(track, key, spacing, say)
-    if params is None:
-        from racing_lib.model.identified import identified_params
-
-        params = identified_params()
-    if grip_margin:
-        params = params.replace(mu=params.mu * (1.0 - grip_margin))
+    params, options = model.planning_params(), model.options
     if key == "centerline":
         traj = Trajectory.from_centerline(track, params, options=options, spacing=spacing)
-        return PlanResult(traj, key, True, "ok", 0, time.perf_counter() - t0)
-    cs = dataclasses.replace(curvature_settings or CurvatureSettings(), spacing=spacing)
+        return PlanResult(traj.with_model(model), key, True, "ok", 0, time.perf_counter() - t0)
+    cs = _with_grid(curvature_settings or CurvatureSettings(), spacing, model)
     if key == "curvature" or start == "warm":
         say(f"curvature QP on {track.name} ({track.length / spacing:.0f} nodes) ...")
     if key == "curvature":
         res = solve_curvature(track, params, options, cs)
         return PlanResult(
-            res.trajectory, key, res.success, res.status, res.iterations, res.solve_time, res
+            res.trajectory.with_model(model),
+            key,
+            res.success,
+            res.status,
+            res.iterations,
+            res.solve_time,
+            res,
         )
-    ts = dataclasses.replace(time_optimal_settings or TimeOptimalSettings(), spacing=spacing)
+    ts = _with_grid(time_optimal_settings or TimeOptimalSettings(), spacing, model)
     say(f"time-optimal NLP ({start} start; IPOPT, up to {ts.max_iter} iterations) ...")
     res = solve_time_optimal(track, params, options, ts, start=start, curvature_settings=cs)
     if res.trajectory is None:
@@ -243,7 +232,7 @@ def plan(
             "command line --max-iter), or another node spacing (--spacing)."
         )
     return PlanResult(
-        res.trajectory,
+        res.trajectory.with_model(model),
         key,
         res.success,
         res.status,
@@ -251,6 +240,16 @@ def plan(
         time.perf_counter() - t0,
         res,
     )
+
+
+_Settings = TypeVar("_Settings", CurvatureSettings, TimeOptimalSettings)
+
+
+def _with_grid(settings: _Settings, spacing: float, model: CarModel) -> _Settings:
+    """Planner settings with the node spacing (m) and, if the model has one, its edge margin."""
+    if model.edge_margin is None:
+        return dataclasses.replace(settings, spacing=spacing)
+    return dataclasses.replace(settings, spacing=spacing, margin=model.edge_margin)
 
 
 __all__ = [

@@ -73,6 +73,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from racing_lib.errors import PlanningError
+from racing_lib.model.car_model import CarModel
 from racing_lib.planning.speed import segment_times, speed_profile
 from racing_lib.planning.trajectory import Trajectory, default_model_inputs
 from racing_lib.vehicle.params import VehicleParams
@@ -641,7 +642,9 @@ def solve_curvature(
         )
     # Keep the fastest line found (by its speed-profile lap time).
     sol, e_y, e_psi, kappa_line, s_line, len_line, prof = best[1]
-    traj = _trajectory_from_line(grid, e_y, e_psi, sol, prof, kappa_line, len_line, track, options)
+    traj = _trajectory_from_line(
+        grid, e_y, e_psi, sol, prof, kappa_line, len_line, track, CarModel(params, options)
+    )
     return CurvatureResult(
         success=success,
         status=status,
@@ -671,7 +674,7 @@ def _trajectory_from_line(
     kappa_line: np.ndarray,
     line_length: float,
     track: Any,
-    options: Any,
+    model: CarModel,
 ) -> Trajectory:
     """The curvature plan as a Trajectory: the QP's line driven at its full speed profile.
 
@@ -692,5 +695,5 @@ def _trajectory_from_line(
         dt=dt,
         track=track,
         method="curvature",
-        model_options=options,
+        model=model,
     )

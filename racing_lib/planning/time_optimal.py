@@ -57,6 +57,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from racing_lib.errors import PlanningError
+from racing_lib.model.car_model import CarModel
 from racing_lib.planning.curvature import (
     CurvatureResult,
     CurvatureSettings,
@@ -497,7 +498,7 @@ def solve_time_optimal(
         solution["s_dot"] = s_dot
         if np.all(s_dot > 0):
             try:
-                traj = _trajectory(grid, z, dt, track, options, status, iters)
+                traj = _trajectory(grid, z, dt, track, CarModel(params, options), status, iters)
             except PlanningError:
                 if success:
                     raise
@@ -523,7 +524,7 @@ def _trajectory(
     z: np.ndarray,
     dt: np.ndarray,
     track: Any,
-    options: Any,
+    model: CarModel,
     status: str,
     iters: list[int],
 ) -> Trajectory:
@@ -540,7 +541,7 @@ def _trajectory(
         dt=dt,
         track=track,
         method="time-optimal",
-        model_options=options,
+        model=model,
         info={"ipopt_status": status, "ipopt_iterations": iters},
     )
 

@@ -2,7 +2,8 @@
 
 A trajectory is what every planner returns and what every controller follows: the line (x, y,
 heading, curvature), the states along it (v_x, v_y, yaw rate r), the inputs (a_x, delta) and the
-time t, all sampled at the same nodes, plus where it came from (track, method, model options).
+time t, all sampled at the same nodes, plus where it came from (track, method) and the model it
+was made with (a :class:`~racing_lib.model.CarModel`, which the MPC that tracks it reads).
 ``trajectory.path`` is the line itself as a :class:`racing_lib.geometry.Path`, so a controller can
 use it as its Frenet reference.
 
@@ -25,15 +26,19 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from racing_lib.errors import PlanningError, RacingLibError
+from racing_lib.errors import ModelError, PlanningError, RacingLibError
 from racing_lib.io import atomic_write_text
+from racing_lib.model.car_model import CarModel
 from racing_lib.planning.speed import segment_times, speed_profile
 
 if TYPE_CHECKING:
     from racing_lib.model.params import ModelParams
 
-#: Version of the plan CSV format written by :meth:`Trajectory.save_csv`.
-PLAN_FORMAT_VERSION = 2
+#: Version of the plan CSV format written by :meth:`Trajectory.save_csv`: 3 adds the model (a
+#: ``# model:`` line of JSON); version 2 files, without it, still load, with no model.
+PLAN_FORMAT_VERSION = 3
+#: The oldest plan format :meth:`Trajectory.load_csv` reads (the first with a checksum).
+OLDEST_PLAN_FORMAT = 2
 
 #: The columns of a plan CSV, in order (units in the names).
 PLAN_COLUMNS = (
@@ -113,8 +118,10 @@ class Trajectory:
         ``Track.checksum()`` of that track (plans are refused on another track).
     method : str
         ``'centerline'``, ``'curvature'`` or ``'time-optimal'``.
-    model_options : dict
-        The model options planned with (drag, weight transfer switches).
+    model : CarModel or None
+        The model the plan was made with (parameters, options, steering actuator, margins); the
+        MPC predicts with it. None for a plan of unknown origin (an old plan file, the best lap,
+        which uses the car's own equations).
     planned_lap_time : float
         Lap time of the plan, s (includes the interval from the last node back to the first).
     info : dict
@@ -137,7 +144,7 @@ class Trajectory:
     track_name: str = ""
     track_checksum: str = ""
     method: str = ""
-    model_options: dict[str, Any] = field(default_factory=dict)
+    model: CarModel | None = None
     planned_lap_time: float = float("nan")
     info: dict[str, Any] = field(default_factory=dict)
     line_length: float = float("nan")
@@ -159,6 +166,11 @@ class Trajectory:
                     f"Trajectory field {name!r} contains NaN or infinite values; the planner "
                     "produced an unusable plan, re-plan with another method."
                 )
+        if self.model is not None and not isinstance(self.model, CarModel):
+            raise PlanningError(
+                f"Trajectory.model must be a racing_lib.model.CarModel or None, got "
+                f"{type(self.model).__name__}."
+            )
         if n is None or n < 4:
             raise PlanningError("a Trajectory needs at least 4 nodes; plan on a finer grid.")
         if np.any(np.diff(self.s) <= 0):
@@ -175,6 +187,18 @@ class Trajectory:
                 math.hypot(self.vx[-1], self.vy[-1]) + math.hypot(self.vx[0], self.vy[0])
             )
             object.__setattr__(self, "planned_lap_time", float(self.t[-1] + gap / v_end))
+
+    @property
+    def model_options(self) -> dict[str, Any]:
+        """The model effects planned with, as a dict (empty when the model is unknown)."""
+        return {} if self.model is None else options_to_dict(self.model.options)
+
+    def with_model(self, model: CarModel | None) -> Trajectory:
+        """The same plan, labelled with the model it was made with."""
+        new = dataclasses.replace(self, model=model)
+        if "path" in self.__dict__:  # the line is the same: keep the Path already built
+            object.__setattr__(new, "path", self.__dict__["path"])
+        return new
 
     # ------------------------------------------------------------------ geometry
     @cached_property
@@ -275,6 +299,9 @@ class Trajectory:
             "track_checksum": self.track_checksum,
             "method": self.method,
             "model_options": json.dumps(self.model_options, sort_keys=True),
+            "model": json.dumps(
+                None if self.model is None else self.model.to_dict(), sort_keys=True
+            ),
             "planned_lap_time_s": f"{self.planned_lap_time:.6f}",
             "length_m": f"{self.line_length:.6f}",
             "nodes": self.n,
@@ -284,7 +311,8 @@ class Trajectory:
         """Write the plan CSV atomically (temporary file, then rename).
 
         Format: ``#`` metadata lines (``# key: value``: format version, track name and checksum,
-        method, model options as JSON, planned lap time, line length, node count), the header
+        method, model options as JSON, the model as JSON (:meth:`CarModel.to_dict`, floats
+        exact), planned lap time, line length, node count), the header
         ``s_m,x_m,y_m,psi_rad,kappa_radpm,vx_mps,vy_mps,r_radps,ax_mps2,delta_rad,t_s``, one row
         per node, and last a ``# sha256: ...`` line: the checksum of every line above it. The
         loader recomputes it, so a truncated, edited or spliced plan is refused instead of driven.
@@ -335,7 +363,7 @@ class Trajectory:
                 f"plan file {where!r} has format version {version}, newer than this "
                 f"racing_lib understands ({PLAN_FORMAT_VERSION}); upgrade racing_lib or re-plan."
             )
-        if version < PLAN_FORMAT_VERSION:
+        if version < OLDEST_PLAN_FORMAT:
             raise PlanningError(
                 f"plan file {where!r} has format version {version}, written by an older "
                 f"racing_lib without a checksum, so it cannot be verified; {replan}."
@@ -369,17 +397,13 @@ class Trajectory:
                     f"{checksum[:12] or 'none'}), not for track {track.name!r} (checksum "
                     f"{want[:12]}); re-plan with `racing-lib plan --track {track.name}`."
                 )
-        try:
-            options = json.loads(meta.get("model_options", "{}") or "{}")
-        except json.JSONDecodeError:
-            options = {}
         cols = {name_: data[:, i] for i, name_ in enumerate(_FIELDS)}
         return cls(
             **cols,
             track_name=name,
             track_checksum=checksum,
             method=meta.get("method", ""),
-            model_options=options,
+            model=_model_from_meta(meta.get("model"), where, replan),
             planned_lap_time=float(meta.get("planned_lap_time_s", "nan")),
             line_length=float(meta.get("length_m", "nan")),
         )
@@ -399,13 +423,14 @@ class Trajectory:
         *,
         track: Any = None,
         method: str = "",
-        model_options: Any = None,
+        model: CarModel | None = None,
         info: dict[str, Any] | None = None,
     ) -> Trajectory:
         """Build a trajectory from positions, states and the time of each interval.
 
         The line's arc length, heading and curvature come from a Path through (x, y); ``dt[k]`` is
-        the time from node k to node k+1 (the last one closes the lap), s.
+        the time from node k to node k+1 (the last one closes the lap), s. ``model`` is the model
+        the states were planned with.
         """
         from racing_lib.geometry import Path
 
@@ -440,7 +465,7 @@ class Trajectory:
             track_name=getattr(track, "name", "") if track is not None else "",
             track_checksum=track.checksum() if track is not None else "",
             method=method,
-            model_options=options_to_dict(model_options),
+            model=model,
             planned_lap_time=float(np.sum(dt)),
             info=dict(info or {}),
             line_length=float(path.length),
@@ -538,7 +563,7 @@ class Trajectory:
             dt=segment_times(np.diff(np.append(s, path.length)), v, np.roll(v, -1)),
             track=track,
             method=method,
-            model_options=options,
+            model=CarModel(params, options),
             info={"speed_profile_success": prof.success},
         )
 
@@ -561,6 +586,19 @@ def default_model_inputs(
     if pedal_map is None:
         pedal_map = params.pedal
     return params, pedal_map, options
+
+
+def _model_from_meta(text: str | None, where: str, replan: str) -> CarModel | None:
+    """The model of a plan file's ``# model:`` line (None when the file has none)."""
+    if text is None:
+        return None
+    try:
+        data = json.loads(text)
+        return None if data is None else CarModel.from_dict(data)
+    except (json.JSONDecodeError, ModelError) as exc:
+        raise PlanningError(
+            f"plan file {where!r} has an unreadable model ({exc}); {replan}."
+        ) from None
 
 
 def _node_arc_length(path: Any, x: np.ndarray, y: np.ndarray) -> np.ndarray:

@@ -9,7 +9,6 @@ from __future__ import annotations
 import dataclasses
 import logging
 import time
-from typing import Any
 
 import numpy as np
 
@@ -28,10 +27,12 @@ from racing_lib.control.mpc.qp_problem import (
 )
 from racing_lib.control.mpc.settings import MPCSettings
 from racing_lib.errors import ControlError
+from racing_lib.geometry import FrenetTracker, Track
 from racing_lib.geometry.spline import wrap_angle
-from racing_lib.interfaces import Command
+from racing_lib.interfaces import Command, Observation
 from racing_lib.jit import BufferedFunction
-from racing_lib.model import NU, NX, U, X, discrete_linearization
+from racing_lib.model import NU, NX, CarModel, U, X, discrete_linearization
+from racing_lib.planning.trajectory import Trajectory
 
 __all__ = ["MPCBase", "PlanTable", "edge_band"]
 
@@ -53,7 +54,9 @@ class PlanTable:
     STATES = slice(VX, EPSI + 1)
     INPUTS = slice(DELTA, AX + 1)
 
-    def __init__(self, plan: Any, theta: np.ndarray, band_min: np.ndarray, band_max: np.ndarray):
+    def __init__(
+        self, plan: Trajectory, theta: np.ndarray, band_min: np.ndarray, band_max: np.ndarray
+    ):
         self.length = float(plan.path.length)
         self.lap_time = float(plan.planned_lap_time)
         s = np.asarray(plan.s, dtype=float)
@@ -105,7 +108,9 @@ class PlanTable:
         return np.interp(tq, self.t, self.s) + laps * self.length
 
 
-def edge_band(plan: Any, track: Any, car_width: float, margin: float) -> tuple:
+def edge_band(
+    plan: Trajectory, track: Track, car_width: float, margin: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Grade and e_y band per plan node, from the track edges.
 
     For each plan node the centerline projection gives ``(s_c, e_c)``; the plan point is ``e_c``
@@ -140,21 +145,33 @@ class MPCBase:
 
     def __init__(
         self,
-        plan: Any,
-        params: Any = None,
-        options: Any = None,
-        pedal_map: Any = None,
-        track: Any = None,
+        plan: Trajectory,
+        model: CarModel | None = None,
+        *,
+        track: Track | None = None,
         settings: MPCSettings | None = None,
         band: tuple[np.ndarray, np.ndarray] | None = None,
     ) -> None:
-        from racing_lib.geometry import FrenetTracker
-        from racing_lib.model import ModelOptions, ModelParams
-
+        if not isinstance(plan, Trajectory):
+            raise ControlError(
+                f"the MPC tracks a planned racing_lib Trajectory, got {type(plan).__name__}; "
+                "plan one with racing_lib.planning.plan(track)."
+            )
+        if model is None:
+            model = plan.model
+        if not isinstance(model, CarModel):
+            raise ControlError(
+                "the plan carries no model to predict with (an old plan file, or a plan made "
+                "outside racing_lib.planning): pass one, e.g. model=racing_lib.model."
+                "identified_model()."
+                if model is None
+                else f"model must be a racing_lib.model.CarModel, got {type(model).__name__}."
+            )
         self.settings = settings or MPCSettings()
-        self.params = params if params is not None else ModelParams()
-        self.options = options if options is not None else ModelOptions()
-        pedal_map = pedal_map if pedal_map is not None else self.params.pedal
+        self.model = model
+        self.params = model.params
+        self.options = model.options
+        pedal_map = self.params.pedal
         st = self.settings
         if st.throttle_scale != 1.0 or st.brake_scale != 1.0:
             pedal_map = dataclasses.replace(
@@ -164,16 +181,6 @@ class MPCBase:
                 p_thr=None if pedal_map.p_thr is None else pedal_map.p_thr * st.throttle_scale,
             )
         self.pedal_map = pedal_map
-        if not isinstance(self.params, ModelParams):
-            raise ControlError(
-                f"params must be a racing_lib.model.ModelParams, got {type(self.params).__name__}."
-            )
-        for name in ("s", "vx", "vy", "r", "delta", "ax", "kappa", "t", "path"):
-            if not hasattr(plan, name):
-                raise ControlError(
-                    f"the MPC needs a planned Trajectory (missing {name!r}); build one with "
-                    "racing_lib.planning (e.g. Trajectory.from_centerline(track))."
-                )
         self.plan = plan
         self.path = plan.path
         n_nodes = len(plan.s)
@@ -220,7 +227,7 @@ class MPCBase:
         self._u_prev = np.zeros(NU)
 
     # --- protocol --------------------------------------------------------------------------------
-    def reset(self, obs: Any) -> None:
+    def reset(self, obs: Observation) -> None:
         """Start a lap from ``obs``: global search on the plan; clear the counters and memory."""
         self._tracker.reset()
         self._tracker.project(obs.x, obs.y)
@@ -248,7 +255,7 @@ class MPCBase:
         return out
 
     # --- pieces ----------------------------------------------------------------------------------
-    def current_state(self, obs: Any) -> np.ndarray:
+    def current_state(self, obs: Observation) -> np.ndarray:
         """The model state ``xi_0`` (6,) of the car relative to the plan's line."""
         s, e_y = self._tracker.project(obs.x, obs.y)
         heading = self._tracker.heading
@@ -344,13 +351,13 @@ class MPCBase:
 
     def _apply(self, steer: float, a_x: float, xi0: np.ndarray) -> Command:
         """Record the command (for the rate penalty and the lag estimate) and make it a Command."""
-        a, _ = steering_lag_coefficients(self.settings.steer_tau, self.settings.dt)
+        a, _ = steering_lag_coefficients(self.model.steer_tau, self.settings.dt)
         self._delta_est = a * self._delta_est + (1.0 - a) * steer
         self._u_prev = np.array([steer, a_x])
         return Command(steer=steer, pedal=float(self.pedal_map.pedal(float(a_x), xi0)))
 
     def _clip_steer(self, steer: float) -> float:
-        lim = self.settings.steer_max
+        lim = self.model.steer_max
         return min(max(float(steer), -lim), lim)
 
     def _fallback(self, xi0: np.ndarray, u_ref0: np.ndarray, status: str) -> Command:
@@ -385,7 +392,7 @@ class MPCBase:
         steer = self._clip_steer(
             u_ref0[U.DELTA] - st.fallback_gain_ey * xi0[X.EY] - st.fallback_gain_epsi * xi0[X.EPSI]
         )
-        a, _ = steering_lag_coefficients(st.steer_tau, st.dt)
+        a, _ = steering_lag_coefficients(self.model.steer_tau, st.dt)
         self._delta_est = a * self._delta_est + (1.0 - a) * steer
         self._u_prev = np.array([steer, 0.0])
         return Command(steer=steer, pedal=float(st.brake_pedal))

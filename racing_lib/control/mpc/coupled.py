@@ -7,7 +7,6 @@ plan.
 from __future__ import annotations
 
 import time
-from typing import Any
 
 import numpy as np
 
@@ -19,8 +18,10 @@ from racing_lib.control.mpc.qp_problem import (
     QPShape,
 )
 from racing_lib.control.mpc.settings import COUPLED_SLICE, COUPLED_STATES, MX, MPCSettings
-from racing_lib.interfaces import Command
-from racing_lib.model import NU, U, X
+from racing_lib.geometry import Track
+from racing_lib.interfaces import Command, Observation
+from racing_lib.model import NU, CarModel, U, X
+from racing_lib.planning.trajectory import Trajectory
 
 __all__ = ["CoupledMPC"]
 
@@ -32,13 +33,10 @@ class CoupledMPC(MPCBase):
     ----------
     plan : Trajectory
         The planned trajectory; ``plan.path`` is the Frenet reference line.
-    params : ModelParams, optional
-        Parameters of the control model (default ``ModelParams()``).
-    options : ModelOptions, optional
-        Effects in the control model (default: drag and longitudinal load transfer).
-    pedal_map : PedalMap, optional
-        Map between pedal and ``a_x`` (default ``params.pedal``): gives the ``a_x`` bounds and
-        turns the solved ``a_x`` into a pedal command.
+    model : CarModel, optional
+        The model to predict with: parameters (the pedal map gives the ``a_x`` bounds and turns
+        the solved ``a_x`` into a pedal), effects and steering actuator. Default: the one the
+        plan carries (``plan.model``), so that plan and controller agree.
     track : Track, optional
         Gives the e_y band (track edges relative to the plan, minus half the car width and the
         margin) and the road pitch. Without it the band is open and the road flat.
@@ -51,17 +49,17 @@ class CoupledMPC(MPCBase):
     --------
     >>> from racing_lib.planning.trajectory import Trajectory
     >>> from racing_lib.sim import SimulatedCar
-    >>> from racing_lib.model import identified_params
+    >>> from racing_lib.model import CarModel, identified_params
     >>> from racing_lib.tracks import load_track
     >>> track = load_track("shortcut")
     >>> params = identified_params()
     >>> plan = Trajectory.from_centerline(track, params=params.replace(mu=1.0))
-    >>> mpc = CoupledMPC(plan, params=params, track=track)
+    >>> mpc = CoupledMPC(plan, CarModel(params), track=track)
     >>> car = SimulatedCar(track, start_speed=float(plan.vx[0]))
     >>> obs = car.reset(seed=0)
     >>> mpc.reset(obs)
     >>> cmd = mpc.step(obs)
-    >>> bool(-1.0 <= cmd.pedal <= 1.0 and abs(cmd.steer) <= mpc.settings.steer_max)
+    >>> bool(-1.0 <= cmd.pedal <= 1.0 and abs(cmd.steer) <= mpc.model.steer_max)
     True
     >>> mpc.stats()
     {'qp_failures': 0.0, 'fallback_shifted': 0.0, 'fallback_brake': 0.0, 'qp_rescues': 0.0}
@@ -69,10 +67,16 @@ class CoupledMPC(MPCBase):
     A whole lap: ``racing_lib.experiments.lap.run_lap(car, mpc, plan, track=track, seed=0)``.
     """
 
-    def __init__(self, plan: Any, params: Any = None, options: Any = None, pedal_map: Any = None,
-                 track: Any = None, settings: MPCSettings | None = None,
-                 band: tuple[np.ndarray, np.ndarray] | None = None) -> None:  # fmt: skip
-        super().__init__(plan, params, options, pedal_map, track, settings, band)
+    def __init__(
+        self,
+        plan: Trajectory,
+        model: CarModel | None = None,
+        *,
+        track: Track | None = None,
+        settings: MPCSettings | None = None,
+        band: tuple[np.ndarray, np.ndarray] | None = None,
+    ) -> None:
+        super().__init__(plan, model, track=track, settings=settings, band=band)
         st = self.settings
         shape = QPShape.make(
             n_state=len(MX),
@@ -80,7 +84,7 @@ class CoupledMPC(MPCBase):
             horizon=st.horizon,
             state_weights=st.state_weights(),
             rate_weights=[st.w_ddelta, st.w_dax],
-            rate_limits=[st.steer_rate_max * st.dt, np.inf],
+            rate_limits=[self.model.steer_rate_max * st.dt, np.inf],
             band_index=MX.EY,
             slack_linear=st.slack_linear,
             slack_quadratic=st.slack_quadratic,
@@ -119,7 +123,7 @@ class CoupledMPC(MPCBase):
         """
         return xi_ref + self._lam_used[:, None] * (xi0 - xi_ref[0])[None, :]
 
-    def step(self, obs: Any) -> Command:
+    def step(self, obs: Observation) -> Command:
         """One control period: project, build the QP along the heuristic trajectory, solve."""
         st = self.settings
         N = st.horizon
@@ -137,8 +141,8 @@ class CoupledMPC(MPCBase):
         # State-dependent a_x limits at the heuristic states, stages 0..N-1.
         a_min, a_max = self.ax_limits(xi_hat[:N])
         u_min, u_max = np.empty((N, NU)), np.empty((N, NU))
-        u_min[:, U.DELTA], u_min[:, U.AX] = -st.steer_max, a_min
-        u_max[:, U.DELTA], u_max[:, U.AX] = st.steer_max, a_max
+        u_min[:, U.DELTA], u_min[:, U.AX] = -self.model.steer_max, a_min
+        u_max[:, U.DELTA], u_max[:, U.AX] = self.model.steer_max, a_max
         # Linearize only at inputs the QP may choose: after a hard brake (or a fallback) the last
         # a_x can lie far outside this step's bounds, and the tyre slopes there made the
         # prediction unstable enough for OSQP to report the QP infeasible.
@@ -148,7 +152,7 @@ class CoupledMPC(MPCBase):
         t3 = time.perf_counter()
         idx = COUPLED_SLICE
         A_q, B_q, d_q = augment_steering_lag(
-            A[:, idx, idx], B[:, idx, :], d[:, idx], U.DELTA, st.steer_tau, st.dt
+            A[:, idx, idx], B[:, idx, :], d[:, idx], U.DELTA, self.model.steer_tau, st.dt
         )
         x_ref = np.zeros((N, len(MX)))
         x_ref[:, : len(COUPLED_STATES)] = xi_ref[1:, idx]

@@ -6,7 +6,6 @@ Each is linearized about the reference alone, with the other subsystem frozen at
 from __future__ import annotations
 
 import time
-from typing import Any
 
 import numpy as np
 
@@ -18,8 +17,10 @@ from racing_lib.control.mpc.qp_problem import (
     QPShape,
 )
 from racing_lib.control.mpc.settings import LATERAL_STATES, MX, MPCSettings
-from racing_lib.interfaces import Command
-from racing_lib.model import NX, U, X
+from racing_lib.geometry import Track
+from racing_lib.interfaces import Command, Observation
+from racing_lib.model import NX, CarModel, U, X
+from racing_lib.planning.trajectory import Trajectory
 
 __all__ = ["DecoupledMPC"]
 
@@ -34,10 +35,16 @@ class DecoupledMPC(MPCBase):
     transition). Parameters as for :class:`~racing_lib.control.mpc.coupled.CoupledMPC`.
     """
 
-    def __init__(self, plan: Any, params: Any = None, options: Any = None, pedal_map: Any = None,
-                 track: Any = None, settings: MPCSettings | None = None,
-                 band: tuple[np.ndarray, np.ndarray] | None = None) -> None:  # fmt: skip
-        super().__init__(plan, params, options, pedal_map, track, settings, band)
+    def __init__(
+        self,
+        plan: Trajectory,
+        model: CarModel | None = None,
+        *,
+        track: Track | None = None,
+        settings: MPCSettings | None = None,
+        band: tuple[np.ndarray, np.ndarray] | None = None,
+    ) -> None:
+        super().__init__(plan, model, track=track, settings=settings, band=band)
         st = self.settings
         w = st.state_weights()
         self.qp_lon = TrackingQP(
@@ -51,7 +58,7 @@ class DecoupledMPC(MPCBase):
                 st.horizon,
                 state_weights=w[:, [MX.VY, MX.R, MX.EPSI, MX.EY, MX.DELTA]],
                 rate_weights=[st.w_ddelta],
-                rate_limits=[st.steer_rate_max * st.dt],
+                rate_limits=[self.model.steer_rate_max * st.dt],
                 band_index=3,
                 slack_linear=st.slack_linear,
                 slack_quadratic=st.slack_quadratic,
@@ -61,7 +68,7 @@ class DecoupledMPC(MPCBase):
         self._qp_list = [self.qp_lon, self.qp_lat]
         self._shift_buffer = []
 
-    def step(self, obs: Any) -> Command:
+    def step(self, obs: Observation) -> Command:
         """One control period: two QPs linearized about the reference, then apply both inputs."""
         st = self.settings
         N = st.horizon
@@ -107,7 +114,7 @@ class DecoupledMPC(MPCBase):
             B[:, lat_idx][:, :, [U.DELTA]],
             d_lat,
             0,
-            st.steer_tau,
+            self.model.steer_tau,
             st.dt,
         )
         x_ref_lat = np.zeros((N, len(lat_idx) + 1))
@@ -119,8 +126,8 @@ class DecoupledMPC(MPCBase):
             d=d_lat,
             x_ref=x_ref_lat,
             u_prev=self._u_prev[[U.DELTA]],
-            u_min=np.full((N, 1), -st.steer_max),
-            u_max=np.full((N, 1), st.steer_max),
+            u_min=np.full((N, 1), -self.model.steer_max),
+            u_max=np.full((N, 1), self.model.steer_max),
             band_min=rows[1:, PlanTable.BMIN],
             band_max=rows[1:, PlanTable.BMAX],
         )

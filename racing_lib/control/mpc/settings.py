@@ -85,19 +85,6 @@ class MPCSettings:
         Distance kept between the car's side and the track edge, m (on top of half the width).
     car_width : float
         Car body width, m (the paper's Demio: 2.008 m).
-    steer_max : float
-        Steering angle limit, rad.
-    steer_rate_max : float
-        Steering slew-rate limit, rad/s, a hard constraint on the change per stage (the simulated
-        car's actuator: 1.2 rad/s). Commanding faster changes than the actuator can follow makes
-        the closed loop oscillate. ``inf`` removes it.
-    steer_tau : float
-        Time constant of the steering actuator's first-order lag, s (the simulated car's is
-        0.08 s; ``racing_lib.experiments.sysid`` identifies it). The QP carries the actual steering
-        angle as an extra state so that it knows a command acts only partly within the first period
-        (see :func:`~racing_lib.control.mpc.linearize.augment_steering_lag`). 0 removes the lag
-        model. At 45 m/s an unmodelled 0.08 s lag was enough to make the closed loop oscillate and
-        spin the car.
     smooth_transition : bool
         Linearize along the heuristic trajectory (True, the paper's method) or along the reference
         itself (False: all lambda_k = 0, the ablation). Used by
@@ -164,11 +151,9 @@ class MPCSettings:
     slack_linear: float = 100.0
     slack_quadratic: float = 1000.0
     margin: float = 0.3
-    # The car's dimensions and actuator: by default the simulated car's data sheet.
+    # The car's body: by default the simulated car's data sheet. Its steering actuator (lag,
+    # angle and rate limits) is part of the model the MPC predicts with (racing_lib.model.CarModel).
     car_width: float = _CAR.width
-    steer_max: float = _CAR.steer_max
-    steer_rate_max: float = _CAR.steer_rate_max
-    steer_tau: float = _CAR.steer_tau
     smooth_transition: bool = True
     throttle_scale: float = 1.0
     brake_scale: float = 1.0
@@ -196,8 +181,6 @@ class MPCSettings:
             raise ControlError(
                 f"MPCSettings.brake_pedal must be in [-1, 0) (a brake), got {self.brake_pedal}."
             )
-        if not self.steer_max > 0:
-            raise ControlError(f"MPCSettings.steer_max must be > 0 rad, got {self.steer_max}.")
         if self.discretization not in ("zoh", "rk4"):
             raise ControlError(
                 f"MPCSettings.discretization must be 'rk4' or 'zoh', got {self.discretization!r}."
@@ -210,13 +193,6 @@ class MPCSettings:
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
                 raise ControlError(f"MPCSettings.{name} must be > 0, got {value}.")
-        if not (math.isfinite(self.steer_tau) and self.steer_tau >= 0):
-            raise ControlError(f"MPCSettings.steer_tau must be >= 0 s, got {self.steer_tau}.")
-        if not self.steer_rate_max > 0:
-            raise ControlError(
-                f"MPCSettings.steer_rate_max must be > 0 rad/s (inf for none), "
-                f"got {self.steer_rate_max}."
-            )
 
     def state_weights(self) -> np.ndarray:
         """Per-stage weights of the coupled states, shape (N, 6) (the last stage scaled).

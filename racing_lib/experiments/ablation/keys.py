@@ -13,16 +13,23 @@ import numpy as np
 from racing_lib.config import fast_mode
 from racing_lib.experiments.ablation.profiles import PROFILE_SPACING
 from racing_lib.experiments.ablation.rows import AblationRow
-from racing_lib.experiments.configs import (
-    TUNING_CONFIGS,
-)
+from racing_lib.experiments.configs import TUNING_CONFIGS, config_model
 from racing_lib.experiments.lap import (
     LapSpec,
 )
 from racing_lib.geometry import Track
 from racing_lib.provenance import code_digest
+from racing_lib.vehicle import VehicleParams
 
-__all__ = ["FORMAT", "code_digests", "compact_json", "digest", "plan_key_inputs", "row_key_inputs"]
+__all__ = [
+    "FORMAT",
+    "code_digests",
+    "compact_json",
+    "digest",
+    "plan_key_inputs",
+    "plan_options",
+    "row_key_inputs",
+]
 
 #: Version of the row files; bumping it invalidates every cached row.
 FORMAT = 1
@@ -71,22 +78,19 @@ def code_digests() -> dict[str, str]:
     }
 
 
-def _planning_params(row: AblationRow) -> tuple[str, dict[str, Any]]:
-    """Which parameters the row's plan is made with: ("identified" | "vehicle", their values)."""
+def _planning_model(row: AblationRow) -> dict[str, Any]:
+    """What the row's plan is made with: the configuration's model, or the car's own equations."""
     if row.best_lap:
-        from racing_lib.vehicle import VehicleParams
-
-        return "vehicle", dataclasses.asdict(VehicleParams())
-    from racing_lib.model.identified import identified_params
-
-    return "identified", identified_params().to_dict()
+        return {"vehicle": dataclasses.asdict(VehicleParams())}
+    return {"model": config_model(row.config).to_dict()}
 
 
 def _plan_method(row: AblationRow) -> str:
     return "best-lap" if row.best_lap else str(TUNING_CONFIGS[row.config]["method"])
 
 
-def _plan_options(row: AblationRow) -> dict[str, Any]:
+def plan_options(row: AblationRow) -> dict[str, Any]:
+    """The model effects a row's configuration sets (none for the best lap)."""
     # The best lap uses the car's own equations: model options do not apply to it.
     return {} if row.best_lap else dict(TUNING_CONFIGS[row.config]["options"])
 
@@ -95,7 +99,6 @@ def plan_key_inputs(
     row: AblationRow, track: Track, spacing: float | None, code: Mapping[str, str]
 ) -> dict[str, Any]:
     """What determines a row's plan: track, method, options, parameters, spacing, planner code."""
-    which, params = _planning_params(row)
     return {
         "kind": "plan",
         "format": FORMAT,
@@ -103,9 +106,7 @@ def plan_key_inputs(
         "track_checksum": track.checksum(),
         "boundary": track.boundary,
         "method": _plan_method(row),
-        "options": _plan_options(row),
-        "params": which,
-        "param_values": params,
+        **_planning_model(row),
         "spacing": spacing,
         "code": code["best-lap" if row.best_lap else "plan"],
     }
@@ -120,9 +121,6 @@ def row_key_inputs(
     code: Mapping[str, str],
 ) -> dict[str, Any]:
     """What determines a row's laps: its plan's key, controller, weights, seeds and the lap code."""
-    from racing_lib.model.identified import identified_params
-    from racing_lib.vehicle import VehicleParams
-
     cfg = TUNING_CONFIGS[row.config]
     return {
         "kind": "row",
@@ -133,8 +131,7 @@ def row_key_inputs(
         "config": row.config,
         "controller": cfg["controller"],
         "smooth_transition": bool(cfg.get("smooth_transition", True)),
-        "mpc_options": dict(cfg["options"]),
-        "mpc_params": identified_params().to_dict(),
+        "mpc_model": config_model(row.config).to_dict(),
         "vehicle": dataclasses.asdict(VehicleParams()),
         "weights": weights,
         "seeds": list(seeds),

@@ -22,6 +22,7 @@ from racing_lib.experiments.ablation.keys import (
     compact_json,
     digest,
     plan_key_inputs,
+    plan_options,
     row_key_inputs,
 )
 from racing_lib.experiments.ablation.profiles import (
@@ -126,8 +127,7 @@ def _get_plan(
         traj, found = _make_plan(row, track, spacing)
         info = {
             "method": inputs["method"],
-            "options": inputs["options"],
-            "params": inputs["params"],
+            "options": plan_options(row),
             "spacing_m": spacing,
             "key": key,
             **found,

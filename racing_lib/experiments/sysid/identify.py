@@ -21,7 +21,7 @@ from racing_lib.experiments.sysid.longitudinal import _fit_brake_limit, _fit_coa
 from racing_lib.experiments.sysid.manoeuvres import MANOEUVRES, DriveLog, collect_logs
 from racing_lib.experiments.sysid.samples import _MIN_SAMPLES, Derivative, FitStats, _samples
 from racing_lib.io import atomic_write_json
-from racing_lib.model import ModelParams, X
+from racing_lib.model import GRIP_MARGIN, CarModel, ModelParams, X
 from racing_lib.model.identified import shipped_fit_path
 from racing_lib.vehicle import (
     axle_cornering_stiffness,
@@ -107,6 +107,20 @@ class IdentificationResult:
     notes: tuple[str, ...] = ()
     n_samples: int = 0
     elapsed: float = 0.0
+
+    def car_model(self, grip_margin: float = GRIP_MARGIN, **fields: Any) -> CarModel:
+        """The identified car as a model to plan and race with: parameters and steering lag.
+
+        Parameters
+        ----------
+        grip_margin : float
+            Share of the identified friction the planner leaves unused (default
+            :data:`~racing_lib.model.GRIP_MARGIN`).
+        **fields
+            Other :class:`~racing_lib.model.CarModel` fields (options, steering limits, edge
+            margin).
+        """
+        return CarModel(self.params, steer_tau=self.steer_tau, grip_margin=grip_margin, **fields)
 
     def value(self, name: str) -> float:
         """A fitted value by its report name (e.g. ``"C_xw"``, ``"mu*D_f"``, ``"C_alpha_r"``)."""
