@@ -18,7 +18,9 @@ from scipy.interpolate import CubicSpline
 
 __all__ = [
     "PAPER",
+    "PAPER_COLUMNS",
     "PAPER_FIELDS",
+    "PAPER_ROW_LABELS",
     "below_plan",
     "corner_window",
     "nearest_corner",
@@ -68,6 +70,38 @@ _PAPER_ROWS: dict[str, tuple[float | None, ...]] = {
 #: The paper's numbers per row name and field (see :data:`PAPER_FIELDS`).
 PAPER: dict[str, dict[str, float | None]] = {
     name: dict(zip(PAPER_FIELDS, values, strict=True)) for name, values in _PAPER_ROWS.items()
+}
+
+
+#: Where the paper prints each row: its table (``"I"`` or ``"II"``) and the row's label there, in
+#: the paper's words (✗: the element removed, ✓: added).
+PAPER_ROW_LABELS: dict[str, tuple[str, str]] = {
+    "main": ("I", "main experiment (Tokyo Expressway)"),
+    "no-drag": ("I", "✗ wind drag force"),
+    "no-longitudinal-weight-transfer": ("I", "✗ longitudinal weight transfer"),
+    "lateral-weight-transfer": ("I", "✓ lateral weight transfer"),
+    "curvature-plan": ("I", "✗ time-optimal trajectory"),
+    "decoupled": ("I", "✗ MPC with coupled model"),
+    "no-smooth-transition": ("I", "✗ smooth reference transition"),
+    "shortcut-main": ("I", "main experiment (Autopolis)"),
+    "shortcut-lateral-weight-transfer": ("I", "✓ lateral weight transfer (Autopolis)"),
+    "best-lap": ("II", "tracking the best human lap"),
+}
+
+#: What each field of :data:`PAPER_FIELDS` is in the paper: a column of its tables, or (``walls``)
+#: the collisions its text describes, since the tables print none.
+PAPER_COLUMNS: dict[str, str] = {
+    "planned": "planned lap time [s]",
+    "mean": "closed-loop lap time, mean [s]",
+    "std": "closed-loop lap time, std [s]",
+    "min": "closed-loop lap time, best [s]",
+    "vx": "MAE of v_x, mean [m/s]",
+    "vx_std": "MAE of v_x, std [m/s]",
+    "vx_max": "MAE of v_x, max [m/s]",
+    "ey": "MAE of e_y, mean [m]",
+    "ey_std": "MAE of e_y, std [m]",
+    "ey_max": "MAE of e_y, max [m]",
+    "walls": "the text: collisions in the laps it describes (not a column)",
 }
 
 
