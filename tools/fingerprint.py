@@ -1,4 +1,4 @@
-"""A behaviour fingerprint: hashes of plans, laps and an identification, to prove a refactor moved nothing.
+"""A behaviour fingerprint: hashes of plans, laps and an identification; a refactor moves none.
 
 Run it before and after a change that should leave every number as it was, and compare::
 
