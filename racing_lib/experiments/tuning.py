@@ -12,10 +12,17 @@ package are in :mod:`racing_lib.experiments.configs`.
 
 Examples
 --------
-Tuning the MPC weights of one configuration on two worker processes (minutes):
+Tuning the MPC weights of one configuration on two worker processes, first the lap to tune on:
 
->>> from racing_lib.experiments.lap import LapSpec  # doctest: +SKIP
->>> spec = LapSpec(track=track, trajectory=plan, controller="coupled-mpc")  # doctest: +SKIP
+>>> from racing_lib.experiments.lap import LapSpec
+>>> from racing_lib.planning import plan
+>>> from racing_lib.tracks import load_track
+>>> track = load_track("expressway")
+>>> reference = plan(track, method="time-optimal").trajectory
+>>> spec = LapSpec(track=track, trajectory=reference, controller="coupled-mpc")
+
+then the tuning, which drives hundreds of closed-loop laps (minutes, so skipped by the tests):
+
 >>> res = tune_weights(spec, seeds=(0,), workers=2, out_dir="tuning/main")  # doctest: +SKIP
 >>> res.best_weights  # doctest: +SKIP
 """

@@ -52,10 +52,16 @@ Examples
 --------
 The shipped table, as the paper prints it:
 
->>> from racing_lib.experiments.ablation import format_table, shipped_table  # doctest: +SKIP
->>> print(format_table(shipped_table()))  # doctest: +SKIP
+>>> from racing_lib.experiments.ablation import format_table, shipped_table
+>>> print(format_table(shipped_table()))  # doctest: +ELLIPSIS
+row  planned lap [s]  closed-loop lap [s]  v_x MAE [m/s]  e_y MAE [m]  wall contacts  completed
+---...
+main ...
+no-drag ...
+...
+best-lap ...
 
-Two rows, two trials each, on two worker processes (minutes):
+Two rows, two trials each, on two worker processes (minutes, so skipped by the tests):
 
 >>> rows = run_ablation(["main", "decoupled"], trials=2, workers=2)  # doctest: +SKIP
 """

@@ -62,9 +62,15 @@ Examples
 >>> from racing_lib.experiments.sysid import collect_logs, identify
 >>> from racing_lib.model import identified_params
 >>> from racing_lib.vehicle import VehicleParams
->>> logs = collect_logs(seed=1, fast=True)              # doctest: +SKIP
->>> result = identify(logs, truth=VehicleParams())      # doctest: +SKIP
->>> print(result.report())                              # doctest: +SKIP
+>>> logs = collect_logs(seed=1, fast=True)
+>>> result = identify(logs, truth=VehicleParams())
+>>> print(result.report())  # doctest: +ELLIPSIS
+value            unit    fitted      true        error     from
+---...
+C_xw             kg/m    ...         0.1302      ...       coast-down
+...
+>>> all(result.within_tolerance().values())  # every toleranced value close to the truth
+True
 >>> params = identified_params()   # the shipped fit (seed 0), what later chapters use
 >>> params.pedal.m_brk > params.pedal.m_thr > 0
 True
