@@ -44,7 +44,9 @@ Modules: :mod:`~racing_lib.experiments.ablation.rows` (the rows),
 :mod:`~racing_lib.experiments.ablation.runner` (plans, laps, the cache),
 :mod:`~racing_lib.experiments.ablation.profiles` (what the figures draw),
 :mod:`~racing_lib.experiments.ablation.table` (the tables, shipped and stale rows),
-:mod:`~racing_lib.experiments.ablation.check` (a recomputed row against the shipped one) and
+:mod:`~racing_lib.experiments.ablation.check` (a recomputed row against the shipped one),
+:mod:`~racing_lib.experiments.ablation.verify` (whether the shipped numbers are still the code's,
+by one recomputed lap per row, and the restamping of their keys after a refactor) and
 :mod:`~racing_lib.experiments.ablation.paper` (the paper's own numbers, and the measures compared
 with them).
 
@@ -88,6 +90,7 @@ from racing_lib.experiments.ablation.table import (
     stale_rows,
     table_records,
 )
+from racing_lib.experiments.ablation.verify import RowCheck, probe, restamp_table, verify_table
 
 __all__ = [
     "DEFAULT_OUT",
@@ -95,15 +98,19 @@ __all__ = [
     "FAST_TRIALS",
     "SHIPPED_TABLE_FILE",
     "AblationRow",
+    "RowCheck",
     "ablation_rows",
     "default_trials",
     "format_table",
     "generate_ablation_table",
     "load_table",
+    "probe",
+    "restamp_table",
     "run_ablation",
     "select_rows",
     "shipped_table",
     "shipped_table_header",
     "stale_rows",
     "table_records",
+    "verify_table",
 ]
