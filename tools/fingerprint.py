@@ -1,4 +1,5 @@
-"""A behaviour fingerprint: hashes of plans, laps and an identification, to prove a refactor moved nothing.
+"""A behaviour fingerprint: hashes of plans, laps and an identification, to show that a refactor
+moved no number.
 
 Run it before and after a change that should leave every number as it was, and compare::
 

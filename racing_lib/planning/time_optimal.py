@@ -60,10 +60,10 @@ from racing_lib.errors import PlanningError
 from racing_lib.planning.curvature import (
     CurvatureResult,
     CurvatureSettings,
-    TrackGrid,
     solve_curvature,
     steady_cornering,
 )
+from racing_lib.planning.grid import TrackGrid
 from racing_lib.planning.speed import speed_profile
 from racing_lib.planning.time_optimal_nlp import (
     NLP_SCALE,
