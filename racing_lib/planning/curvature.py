@@ -364,8 +364,6 @@ def _lateral_qp(
     return status, np.asarray(z.value).reshape(n, 5), time.perf_counter() - t0
 
 
-# long function: one loop of the paper's iteration (speed profile, linearization, QP, line update,
-#   keep the best), whose state carries from pass to pass
 def solve_curvature(
     track: Any,
     params: ModelParams | None = None,
@@ -410,7 +408,7 @@ def solve_curvature(
     >>> res = solve_curvature(load_track("expressway"))  # doctest: +SKIP
     >>> res.iterations, round(res.trajectory.lap_time, 1)  # doctest: +SKIP
     """
-    from racing_lib.model import X, jacobians, spatial_dynamics
+    from racing_lib.model import jacobians, spatial_dynamics
 
     st = settings or CurvatureSettings()
     params, pedal, options = default_model_inputs(params, None, options)
@@ -421,119 +419,234 @@ def solve_curvature(
     wheelbase = float(params.l_f + params.l_r)
     jac = jacobians(params, options, "spatial").map(n)
     f_s = spatial_dynamics(params, options).map(n)
-    lat = [int(getattr(X, name)) for name in _LAT]
 
     # Start: the centerline at its speed profile.
-    e_y = np.zeros(n)
-    e_psi = np.zeros(n)
-    kappa_line, s_line, len_line = grid.kappa, grid.s, grid.length
-    prof: Any = None
-    history: list[float] = []
-    lap_times: list[float] = []
-    qp_time = 0.0
-    status = "not_run"
-    success = False
-    v_y = np.zeros(n)
-    sol = None
-    v_hat_prev: np.ndarray | None = None
-    it = 0
-    prof = speed_profile(
-        s_line, kappa_line, params, pedal, grid.theta, st.v_top, options, length=len_line
+    run = _LineIteration(
+        e_y=np.zeros(n), e_psi=np.zeros(n), kappa=grid.kappa, s=grid.s, length=grid.length
     )
-    lap_times.append(prof.lap_time)
-    best: tuple[float, Any] | None = None
-    since_best = 0
-    for it in range(1, st.max_iterations + 1):  # noqa: B007 - reported
-        v_new = st.speed_fraction * prof.v
-        # Under-relax the speed estimate: the line and its speed profile feed each other, and
-        # taking the new profile whole makes the line swing by a few decimetres forever.
-        v_hat = v_new if v_hat_prev is None else v_hat_prev + st.relaxation * (v_new - v_hat_prev)
-        v_hat_prev = v_hat
-        # Linearize at steady cornering on the current line at v_hat: with the tyres on the
-        # stable side of their peak the linearized lateral dynamics are stable.
-        v_y, r_bar, delta_bar = steady_cornering(v_hat, kappa_line, params)
-        # Longitudinal input that makes v_x follow v_hat between nodes (v dv/ds).
-        a_bar = st.speed_fraction**2 * prof.a_x
-        xi_bar = np.zeros((6, n))
-        xi_bar[X.VX] = v_hat
-        xi_bar[X.VY] = v_y
-        xi_bar[X.R] = r_bar
-        xi_bar[X.EPSI] = e_psi
-        xi_bar[X.EY] = e_y
-        xi_bar[X.S] = grid.s
-        u_bar = np.vstack([delta_bar, a_bar])
-        args = (xi_bar, u_bar, grid.kappa[None, :], grid.theta[None, :])
-        A_all, B_all = jac(*args)
-        A_all = np.asarray(A_all).reshape(6, n, 6).transpose(1, 0, 2)
-        B_all = np.asarray(B_all).reshape(6, n, 2).transpose(1, 0, 2)
-        f_bar = np.asarray(f_s(*args)).T
-        A = A_all[:, lat][:, :, lat]
-        B = B_all[:, lat, 0]
-        # v_x and a_x stay at their bar values, so only the lateral deviations enter:
-        # f ~= f_bar + A (xi - xi_bar) + B (delta - delta_bar).
-        xi_lat = xi_bar[lat].T
-        f0 = f_bar[:, lat] - np.einsum("kij,kj->ki", A, xi_lat) - B * delta_bar[:, None]
-        status, new, t_qp = _lateral_qp(A, B, f0, grid, v_hat, wheelbase, st, e_y)
-        qp_time += t_qp
+    run.prof = _line_profile(run, grid, params, pedal, options, st)
+    run.lap_times.append(run.prof.lap_time)
+    for it in range(1, st.max_iterations + 1):
+        run.it = it
+        v_hat = _next_v_hat(run, st)
+        A, B, f0 = _linearized_lateral(jac, f_s, grid, params, run, v_hat, st)
+        status, new, t_qp = _lateral_qp(A, B, f0, grid, v_hat, wheelbase, st, run.e_y)
+        run.status = status
+        run.qp_time += t_qp
         if new is None:
-            msg = (
-                f"curvature QP iteration {it}: {st.solver} (via cvxpy) returned status "
-                f"'{status}' on track {getattr(track, 'name', '?')!r}. Try: check that the track "
-                "is wide enough for the car; another node spacing (plan(..., spacing=...); on "
-                "the command line --spacing 4); or, in CurvatureSettings, a larger delta_max or "
-                "a lower speed_fraction."
-            )
             if raise_on_failure:
-                raise PlanningError(msg)
+                raise PlanningError(_qp_failure_message(it, status, st, track))
             break
-        change = float(np.max(np.abs(new[:, QPVar.EY] - e_y)))
-        history.append(change)
-        if sol is not None and it > st.full_steps:
-            # Damped fixed-point step: the line and its speed estimate feed each other, and on some
-            # tracks the undamped iteration swings between two lines by a metre or two.
-            new = sol + st.line_step * (new - sol)
-        sol = new
-        v_y, e_psi, e_y = new[:, QPVar.VY], new[:, QPVar.EPSI], new[:, QPVar.EY]
-        kappa_line, s_line, len_line = grid.line_curvature(e_y)
-        prof = speed_profile(
-            s_line, kappa_line, params, pedal, grid.theta, st.v_top, options, length=len_line
-        )
-        lap_times.append(prof.lap_time)
-        if best is None or prof.lap_time < best[0] - st.lap_tol:
-            since_best = 0
-        else:
-            since_best += 1
-        if best is None or prof.lap_time < best[0]:
-            best = (prof.lap_time, (sol, e_y, e_psi, kappa_line, s_line, len_line, prof))
-        if change < st.tol:
-            status, success = "converged", True
-            break
-        if since_best >= st.patience:
-            # The fixed-point iteration is not a descent method on the lap time: once the line
-            # stops getting faster it wanders between nearly equivalent lines (e.g. in long
-            # constant-radius corners, where many lines have the same curvature).
-            status, success = "settled", True
+        if _move_line(run, new, grid, params, pedal, options, st):
             break
     else:
-        status = "max_iterations"
+        run.status = "max_iterations"
+    return _curvature_result(run, grid, track, options, st, t_start)
 
-    if sol is None or best is None:
+
+@dataclass
+class _LineIteration:
+    """The state the curvature iteration carries from one QP to the next.
+
+    Attributes
+    ----------
+    e_y, e_psi : ndarray (N,)
+        The current line: lateral offset (m) and heading error (rad) on the grid.
+    kappa, s : ndarray (N,)
+        The current line's curvature (1/m) and arc length (m) at the nodes.
+    length : float
+        The current line's length, m.
+    prof : SpeedProfile or None
+        The current line's speed profile.
+    sol : ndarray (N, 5) or None
+        The last (damped) QP solution, columns as :class:`QPVar`.
+    v_hat_prev : ndarray (N,) or None
+        The last speed estimate v_hat, m/s.
+    history, lap_times, qp_time, it, status, success
+        As in :class:`CurvatureResult` (``it``: the iterations done).
+    best, since_best
+        (lap time in s, (sol, e_y, e_psi, kappa, s, length, prof)) of the fastest line so far,
+        and the iterations since the lap time last improved by more than ``lap_tol``.
+    """
+
+    e_y: np.ndarray
+    e_psi: np.ndarray
+    kappa: np.ndarray
+    s: np.ndarray
+    length: float
+    prof: Any = None
+    sol: np.ndarray | None = None
+    v_hat_prev: np.ndarray | None = None
+    history: list[float] = field(default_factory=list)
+    lap_times: list[float] = field(default_factory=list)
+    qp_time: float = 0.0
+    it: int = 0
+    status: str = "not_run"
+    success: bool = False
+    best: tuple[float, Any] | None = None
+    since_best: int = 0
+
+
+def _line_profile(
+    run: _LineIteration,
+    grid: TrackGrid,
+    params: ModelParams,
+    pedal: Any,
+    options: Any,
+    st: CurvatureSettings,
+) -> Any:
+    """The speed profile (:func:`speed_profile`) of the iteration's current line."""
+    return speed_profile(
+        run.s, run.kappa, params, pedal, grid.theta, st.v_top, options, length=run.length
+    )
+
+
+def _next_v_hat(run: _LineIteration, st: CurvatureSettings) -> np.ndarray:
+    """The next speed estimate v_hat (m/s): a fraction of the line's profile, under-relaxed."""
+    v_new = st.speed_fraction * run.prof.v
+    # Under-relax the speed estimate: the line and its speed profile feed each other, and
+    # taking the new profile whole makes the line swing by a few decimetres forever.
+    prev = run.v_hat_prev
+    v_hat = v_new if prev is None else prev + st.relaxation * (v_new - prev)
+    run.v_hat_prev = v_hat
+    return v_hat
+
+
+def _linearized_lateral(
+    jac: Any,
+    f_s: Any,
+    grid: TrackGrid,
+    params: ModelParams,
+    run: _LineIteration,
+    v_hat: np.ndarray,
+    st: CurvatureSettings,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The lateral dynamics linearized at steady cornering on the current line at v_hat (m/s).
+
+    ``jac`` and ``f_s`` are the spatial model's Jacobians and right-hand side mapped over the N
+    nodes; ``run`` holds the current line (e_y in m, e_psi in rad) and its speed profile. Returns
+    A (N, 4, 4), B (N, 4) and f0 (N, 4) with d xi / ds ~= A xi + B delta + f0 (per m) for the
+    lateral state xi (as ``_LAT``).
+    """
+    from racing_lib.model import X
+
+    n = grid.n
+    lat = [int(getattr(X, name)) for name in _LAT]
+    # Linearize at steady cornering on the current line at v_hat: with the tyres on the
+    # stable side of their peak the linearized lateral dynamics are stable.
+    v_y, r_bar, delta_bar = steady_cornering(v_hat, run.kappa, params)
+    # Longitudinal input that makes v_x follow v_hat between nodes (v dv/ds).
+    a_bar = st.speed_fraction**2 * run.prof.a_x
+    xi_bar = np.zeros((6, n))
+    xi_bar[X.VX] = v_hat
+    xi_bar[X.VY] = v_y
+    xi_bar[X.R] = r_bar
+    xi_bar[X.EPSI] = run.e_psi
+    xi_bar[X.EY] = run.e_y
+    xi_bar[X.S] = grid.s
+    u_bar = np.vstack([delta_bar, a_bar])
+    args = (xi_bar, u_bar, grid.kappa[None, :], grid.theta[None, :])
+    A_all, B_all = jac(*args)
+    A_all = np.asarray(A_all).reshape(6, n, 6).transpose(1, 0, 2)
+    B_all = np.asarray(B_all).reshape(6, n, 2).transpose(1, 0, 2)
+    f_bar = np.asarray(f_s(*args)).T
+    A = A_all[:, lat][:, :, lat]
+    B = B_all[:, lat, 0]
+    # v_x and a_x stay at their bar values, so only the lateral deviations enter:
+    # f ~= f_bar + A (xi - xi_bar) + B (delta - delta_bar).
+    xi_lat = xi_bar[lat].T
+    f0 = f_bar[:, lat] - np.einsum("kij,kj->ki", A, xi_lat) - B * delta_bar[:, None]
+    return A, B, f0
+
+
+def _qp_failure_message(it: int, status: str, st: CurvatureSettings, track: Any) -> str:
+    """What went wrong in QP iteration ``it`` (solver status ``status``) and what to try."""
+    return (
+        f"curvature QP iteration {it}: {st.solver} (via cvxpy) returned status "
+        f"'{status}' on track {getattr(track, 'name', '?')!r}. Try: check that the track "
+        "is wide enough for the car; another node spacing (plan(..., spacing=...); on "
+        "the command line --spacing 4); or, in CurvatureSettings, a larger delta_max or "
+        "a lower speed_fraction."
+    )
+
+
+def _move_line(
+    run: _LineIteration,
+    new: np.ndarray,
+    grid: TrackGrid,
+    params: ModelParams,
+    pedal: Any,
+    options: Any,
+    st: CurvatureSettings,
+) -> bool:
+    """Move the line towards the QP solution ``new`` (N, 5), profile it, keep the fastest.
+
+    Returns True when the iteration stops: 'converged' (the line moved less than ``st.tol``, m)
+    or 'settled' (no lap-time gain for ``st.patience`` iterations); ``run`` records which.
+    """
+    change = float(np.max(np.abs(new[:, QPVar.EY] - run.e_y)))
+    run.history.append(change)
+    if run.sol is not None and run.it > st.full_steps:
+        # Damped fixed-point step: the line and its speed estimate feed each other, and on some
+        # tracks the undamped iteration swings between two lines by a metre or two.
+        new = run.sol + st.line_step * (new - run.sol)
+    run.sol = new
+    run.e_psi, run.e_y = new[:, QPVar.EPSI], new[:, QPVar.EY]
+    run.kappa, run.s, run.length = grid.line_curvature(run.e_y)
+    prof = run.prof = _line_profile(run, grid, params, pedal, options, st)
+    run.lap_times.append(prof.lap_time)
+    best = run.best
+    if best is None or prof.lap_time < best[0] - st.lap_tol:
+        run.since_best = 0
+    else:
+        run.since_best += 1
+    if best is None or prof.lap_time < best[0]:
+        line = (run.sol, run.e_y, run.e_psi, run.kappa, run.s, run.length, prof)
+        run.best = (prof.lap_time, line)
+    if change < st.tol:
+        run.status, run.success = "converged", True
+        return True
+    if run.since_best >= st.patience:
+        # The fixed-point iteration is not a descent method on the lap time: once the line
+        # stops getting faster it wanders between nearly equivalent lines (e.g. in long
+        # constant-radius corners, where many lines have the same curvature).
+        run.status, run.success = "settled", True
+        return True
+    return False
+
+
+def _curvature_result(
+    run: _LineIteration,
+    grid: TrackGrid,
+    track: Any,
+    options: Any,
+    st: CurvatureSettings,
+    t_start: float,
+) -> CurvatureResult:
+    """The fastest line of the iteration, driven at its full speed profile, as the result.
+
+    Raises
+    ------
+    PlanningError
+        If no QP was solved.
+    """
+    if run.sol is None or run.best is None:
         raise PlanningError(
             f"curvature QP: {st.solver} (via cvxpy) found no solution in the first iteration "
-            f"(status '{status}'); check the track widths and the steering limit."
+            f"(status '{run.status}'); check the track widths and the steering limit."
         )
     # Keep the fastest line found (by its speed-profile lap time).
-    sol, e_y, e_psi, kappa_line, s_line, len_line, prof = best[1]
+    sol, e_y, e_psi, kappa_line, s_line, len_line, prof = run.best[1]
     traj = _trajectory_from_line(grid, e_y, e_psi, sol, prof, kappa_line, len_line, track, options)
     return CurvatureResult(
-        success=success,
-        status=status,
-        iterations=it,
+        success=run.success,
+        status=run.status,
+        iterations=run.it,
         solve_time=time.perf_counter() - t_start,
-        qp_time=qp_time,
+        qp_time=run.qp_time,
         trajectory=traj,
-        history=history,
-        lap_times=lap_times,
+        history=run.history,
+        lap_times=run.lap_times,
         e_y=e_y,
         e_psi=e_psi,
         v_y=sol[:, QPVar.VY],
