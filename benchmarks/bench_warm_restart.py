@@ -36,7 +36,7 @@ import numpy as np
 from _script import argument_parser, run, tracks_to_measure
 
 from racing_lib.planning import GRIP_MARGIN
-from racing_lib.planning.curvature import TrackGrid
+from racing_lib.planning.grid import TrackGrid
 from racing_lib.planning.time_optimal import (
     _SCALE,
     _VARS,

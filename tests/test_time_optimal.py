@@ -208,8 +208,8 @@ def test_expressway_cold_start():
 
 
 def test_what_the_plan_asks_of_the_car_against_what_it_has(oval, nlp):
-    from racing_lib.planning.curvature import OPEN_MARGIN
     from racing_lib.planning.demands import plan_demands
+    from racing_lib.planning.grid import OPEN_MARGIN
 
     demands = {d.name: d for d in plan_demands(nlp.trajectory, PARAMS, track=oval)}
     # The plan drives at the limit of the ellipse it was given (the full model here: no margin)

@@ -36,7 +36,7 @@ _DEG = 180.0 / math.pi
 @functools.lru_cache(maxsize=1)
 def _grid():
     """The expressway on a 5 m planning grid."""
-    from racing_lib.planning.curvature import TrackGrid
+    from racing_lib.planning.grid import TrackGrid
     from racing_lib.tracks import load_track
 
     return TrackGrid.from_track(load_track("expressway"), spacing=5.0)

@@ -357,8 +357,6 @@ class CmaTuner:
         )
 
     # -- the loop -----------------------------------------------------------------------------
-    # long function: one generation loop with its checkpoint, resume and executor paths, which must
-    #   stay in step
     def run(
         self,
         *,
@@ -396,35 +394,10 @@ class CmaTuner:
         out = FilePath(out_dir) if out_dir is not None else None
         if resume and out is None:
             raise ControlError("resume=True needs out_dir, the folder of the run to continue.")
-        state = self._load(out) if (resume and out is not None) else None
-        if state is None:
-            state = {
-                "format": _FORMAT,
-                "identity": self._identity(),
-                "es": self._new_strategy(),
-                "generation": 0,
-                "evaluations": 0,
-                "history": [],
-                "best_params": None,
-                "best_value": math.inf,
-                "elapsed": 0.0,
-                "status": "",
-            }
+        state = self._start_state(out, resume)
         es = state["es"]
         max_gen = int(self.settings.max_generations)
-
-        own_pool = None
-        if executor is None and (workers is None or workers > 1):
-            own_pool = ProcessPoolExecutor(max_workers=workers)
-            executor = own_pool
-        elif executor is not None and not isinstance(executor, Executor):
-            if hasattr(executor, "get_executor"):  # a dask.distributed Client
-                executor = executor.get_executor()
-            elif not hasattr(executor, "map"):
-                raise ControlError(
-                    f"executor must be a concurrent.futures.Executor or a Dask Client, got "
-                    f"{type(executor).__name__}."
-                )
+        executor, own_pool = _candidate_executor(executor, workers)
 
         from tqdm.auto import tqdm
 
@@ -448,37 +421,7 @@ class CmaTuner:
                 if stop:
                     status = ",".join(sorted(str(k) for k in stop))
                     break
-                xs = es.ask()
-                params = [self.space.to_params(x) for x in xs]
-                if executor is None:
-                    raw = [self.evaluate(p) for p in params]
-                else:
-                    raw = list(executor.map(self.evaluate, params))
-                values = [float(v) if math.isfinite(float(v)) else NONFINITE_VALUE for v in raw]
-                es.tell(xs, values)
-
-                gen = state["generation"] + 1
-                i_best = int(np.argmin(values))
-                if values[i_best] < state["best_value"]:
-                    state["best_value"] = values[i_best]
-                    state["best_params"] = params[i_best]
-                state["generation"] = gen
-                state["evaluations"] += len(values)
-                state["elapsed"] = elapsed0 + time.perf_counter() - t_run
-                state["history"].append(
-                    {
-                        "generation": gen,
-                        "candidates": params,
-                        "x": [np.asarray(x, float).tolist() for x in xs],
-                        "objectives": [float(v) for v in raw],
-                        "best_objective": state["best_value"],
-                        "best_weights": state["best_params"],
-                        "sigma": float(es.sigma),
-                        "mean": np.asarray(es.mean, float).tolist(),
-                        "elapsed": state["elapsed"],
-                    }
-                )
-                state["status"] = "running"
+                self._generation(state, executor, elapsed0, t_run)
                 if out is not None:
                     self._save(out, state, "running")
                 bar.update(1)
@@ -492,6 +435,77 @@ class CmaTuner:
         state["elapsed"] = elapsed0 + time.perf_counter() - t_run
         if out is not None:
             self._save(out, state, status)
+        return self._result(state, status)
+
+    def _start_state(self, out: FilePath | None, resume: bool) -> dict[str, Any]:
+        """The run's state: the checkpoint in ``out`` when resuming and there is one, else new."""
+        state = self._load(out) if (resume and out is not None) else None
+        if state is None:
+            state = {
+                "format": _FORMAT,
+                "identity": self._identity(),
+                "es": self._new_strategy(),
+                "generation": 0,
+                "evaluations": 0,
+                "history": [],
+                "best_params": None,
+                "best_value": math.inf,
+                "elapsed": 0.0,
+                "status": "",
+            }
+        return state
+
+    def _generation(
+        self, state: dict[str, Any], executor: Any, elapsed0: float, t_run: float
+    ) -> None:
+        """One generation: ask for candidates, evaluate them, tell the strategy, record it.
+
+        Parameters
+        ----------
+        state : dict
+            The run's state (strategy, counters, best so far, history), updated in place.
+        executor : Executor or None
+            Where the candidates are evaluated (None: serially in this process).
+        elapsed0 : float
+            Wall time of the run before this session (a resumed run), s.
+        t_run : float
+            ``time.perf_counter()`` at the start of this session, s.
+        """
+        es = state["es"]
+        xs = es.ask()
+        params = [self.space.to_params(x) for x in xs]
+        if executor is None:
+            raw = [self.evaluate(p) for p in params]
+        else:
+            raw = list(executor.map(self.evaluate, params))
+        values = [float(v) if math.isfinite(float(v)) else NONFINITE_VALUE for v in raw]
+        es.tell(xs, values)
+
+        gen = state["generation"] + 1
+        i_best = int(np.argmin(values))
+        if values[i_best] < state["best_value"]:
+            state["best_value"] = values[i_best]
+            state["best_params"] = params[i_best]
+        state["generation"] = gen
+        state["evaluations"] += len(values)
+        state["elapsed"] = elapsed0 + time.perf_counter() - t_run
+        state["history"].append(
+            {
+                "generation": gen,
+                "candidates": params,
+                "x": [np.asarray(x, float).tolist() for x in xs],
+                "objectives": [float(v) for v in raw],
+                "best_objective": state["best_value"],
+                "best_weights": state["best_params"],
+                "sigma": float(es.sigma),
+                "mean": np.asarray(es.mean, float).tolist(),
+                "elapsed": state["elapsed"],
+            }
+        )
+        state["status"] = "running"
+
+    def _result(self, state: dict[str, Any], status: str) -> TuningResult:
+        """The :class:`TuningResult` of a finished run's state (ended with ``status``)."""
         best = state["best_params"] or self.space.to_params(self.space.x0())
         best_value = float(state["best_value"])
         return TuningResult(
@@ -504,6 +518,39 @@ class CmaTuner:
             status=status,
             elapsed=float(state["elapsed"]),
         )
+
+
+def _candidate_executor(
+    executor: Any, workers: int | None
+) -> tuple[Any, ProcessPoolExecutor | None]:
+    """Where a run evaluates its candidates, and the pool it made for that (to shut down).
+
+    Parameters
+    ----------
+    executor : Executor, dask Client or None
+        The caller's executor (a Dask client is used through ``client.get_executor()``).
+    workers : int or None
+        Without ``executor``: 1 for this process, N > 1 for a pool of N processes, None one per
+        CPU.
+
+    Raises
+    ------
+    ControlError
+        If ``executor`` is neither an executor nor a Dask client.
+    """
+    own_pool = None
+    if executor is None and (workers is None or workers > 1):
+        own_pool = ProcessPoolExecutor(max_workers=workers)
+        executor = own_pool
+    elif executor is not None and not isinstance(executor, Executor):
+        if hasattr(executor, "get_executor"):  # a dask.distributed Client
+            executor = executor.get_executor()
+        elif not hasattr(executor, "map"):
+            raise ControlError(
+                f"executor must be a concurrent.futures.Executor or a Dask Client, got "
+                f"{type(executor).__name__}."
+            )
+    return executor, own_pool
 
 
 def tune(

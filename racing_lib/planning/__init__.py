@@ -31,9 +31,9 @@ from racing_lib.model.identified import GRIP_MARGIN, identified_model
 from racing_lib.planning.curvature import (
     CurvatureResult,
     CurvatureSettings,
-    TrackGrid,
     solve_curvature,
 )
+from racing_lib.planning.grid import TrackGrid
 from racing_lib.planning.speed import SpeedProfile, speed_profile
 from racing_lib.planning.time_optimal import (
     DEFAULT_START,

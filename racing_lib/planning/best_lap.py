@@ -8,7 +8,7 @@ plant's vector field
 (:func:`racing_lib.vehicle.dynamics.car_vector_field`) and its true parameters
 (:class:`racing_lib.vehicle.VehicleParams`) instead of the identified planning model.
 
-Per node of the grid (:class:`racing_lib.planning.curvature.TrackGrid`):
+Per node of the grid (:class:`racing_lib.planning.grid.TrackGrid`):
 
 * states: v_x, v_y, r, the actual road-wheel angle delta (the steering actuator's first-order lag
   is a state), e_psi, e_y; d/ds = (d/dt) / s_dot with the Frenet kinematics
@@ -50,7 +50,7 @@ import numpy as np
 
 from racing_lib.errors import PlanningError
 from racing_lib.model import frenet_kinematics
-from racing_lib.planning.curvature import DEFAULT_CAR_WIDTH, TrackGrid
+from racing_lib.planning.grid import DEFAULT_CAR_WIDTH, TrackGrid
 from racing_lib.planning.time_optimal import (
     TimeOptimalResult,
     TimeOptimalSettings,

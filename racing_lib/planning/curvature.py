@@ -74,129 +74,12 @@ import scipy.sparse as sp
 
 from racing_lib.errors import PlanningError
 from racing_lib.model.car_model import CarModel
+from racing_lib.planning.grid import DEFAULT_CAR_WIDTH, TrackGrid
 from racing_lib.planning.speed import segment_times, speed_profile
 from racing_lib.planning.trajectory import Trajectory, default_model_inputs
-from racing_lib.vehicle.params import VehicleParams
 
 if TYPE_CHECKING:
     from racing_lib.model.params import ModelParams
-
-#: Body width of the default car (racing_lib.vehicle.VehicleParams.width), m.
-DEFAULT_CAR_WIDTH = VehicleParams().width
-#: Default clearance between the car's side and a wall, m. A wall costs speed, so the plan leaves
-#: room for the coupled MPC's tracking error where the line passes a wall (about 0.4 m at most on
-#: the expressway; with 0.5 m the car brushed the wall after corner 3 in every seed).
-WALL_MARGIN = 0.8
-#: Default clearance between the car's side and the edge of an open track, m. Beyond the edge
-#: the wheels lose grip, and a car that slides there at a hairpin exit spins: with 0.3 m, real
-#: circuits (Austin, Spielberg) were left for seconds at their slow corners, where the car runs
-#: half a metre wide of the plan.
-OPEN_MARGIN = 0.8
-
-
-@dataclass(frozen=True)
-class TrackGrid:
-    """The planning grid: N equally spaced nodes along the track centerline.
-
-    Attributes
-    ----------
-    s : ndarray (N,)
-        Arc length of the nodes along the centerline, m.
-    ds : ndarray (N,)
-        Distance from node k to node k+1 (the last wraps to node 0), m.
-    kappa, theta : ndarray (N,)
-        Centerline curvature (1/m) and road grade (rad) at the nodes.
-    ey_min, ey_max : ndarray (N,)
-        Bounds on the lateral offset e_y of the car's centre, m (right edge + clearance, left edge -
-        clearance).
-    length : float
-        Lap length along the centerline, m.
-    """
-
-    s: np.ndarray
-    ds: np.ndarray
-    kappa: np.ndarray
-    theta: np.ndarray
-    ey_min: np.ndarray
-    ey_max: np.ndarray
-    length: float
-    track: Any = None
-
-    @property
-    def n(self) -> int:
-        """Number of nodes."""
-        return int(self.s.size)
-
-    @classmethod
-    def from_track(
-        cls,
-        track: Any,
-        spacing: float = 3.0,
-        car_width: float = DEFAULT_CAR_WIDTH,
-        margin: float | None = None,
-    ) -> TrackGrid:
-        """Sample ``track`` every ``spacing`` m and compute the e_y bounds.
-
-        Parameters
-        ----------
-        track : Track
-            The track.
-        spacing : float
-            Node spacing, m (rounded so the nodes divide the lap evenly).
-        car_width : float
-            Body width of the car, m.
-        margin : float, optional
-            Clearance between the car's side and the edge, m (default 0.8 with walls, 0.3 open).
-
-        Raises
-        ------
-        PlanningError
-            If the track is narrower than the car plus the margins somewhere.
-        """
-        if not spacing > 0:
-            raise PlanningError(f"grid spacing must be positive, got {spacing!r} m.")
-        line = track.centerline
-        n = max(16, int(round(line.length / spacing)))
-        s = np.asarray(line.sample(n=n), float)
-        if margin is None:
-            margin = WALL_MARGIN if getattr(track, "boundary", "open") == "walls" else OPEN_MARGIN
-        half = 0.5 * car_width + margin
-        wl = np.asarray(track.width_left(s), float)
-        wr = np.asarray(track.width_right(s), float)
-        ey_max = wl - half
-        ey_min = -(wr - half)
-        room = ey_max - ey_min
-        if np.any(room < 0.05):
-            k = int(np.argmin(room))
-            raise PlanningError(
-                f"track {getattr(track, 'name', '?')!r} is too narrow for the car near s = "
-                f"{s[k]:.0f} m: {wl[k] + wr[k]:.2f} m wide, but the car needs "
-                f"{car_width:.2f} m plus {margin:.2f} m clearance on each side; no planner can "
-                "keep it on the track. Use a smaller car_width/margin or fix the track widths."
-            )
-        return cls(
-            s=s,
-            ds=np.diff(np.append(s, line.length)),
-            kappa=np.asarray(line.curvature(s), float),
-            theta=np.asarray(track.grade(s), float),
-            ey_min=ey_min,
-            ey_max=ey_max,
-            length=float(line.length),
-            track=track,
-        )
-
-    def line_xy(self, e_y: np.ndarray, e_psi: np.ndarray | None = None) -> tuple[Any, Any, Any]:
-        """Cartesian (x, y, psi) of a line given by its offsets e_y (m) at the nodes."""
-        return self.track.centerline.to_cartesian(self.s, e_y, e_psi)
-
-    def line_curvature(self, e_y: np.ndarray) -> np.ndarray:
-        """Curvature (1/m) at the nodes of the line with offsets e_y, from a spline through it."""
-        from racing_lib.geometry.path import Path, chord_arc_length
-
-        x, y, _ = self.line_xy(e_y)
-        path = Path(x, y, check=False)
-        s_line = chord_arc_length(x, y, path.length)
-        return np.asarray(path.curvature(s_line), float), s_line, path.length
 
 
 @dataclass(frozen=True)
@@ -482,8 +365,6 @@ def _lateral_qp(
     return status, np.asarray(z.value).reshape(n, 5), time.perf_counter() - t0
 
 
-# long function: one loop of the paper's iteration (speed profile, linearization, QP, line update,
-#   keep the best), whose state carries from pass to pass
 def solve_curvature(
     track: Any,
     params: ModelParams | None = None,
@@ -529,7 +410,7 @@ def solve_curvature(
     >>> res.success, round(res.trajectory.lap_time)
     (True, 106)
     """
-    from racing_lib.model import X, jacobians, spatial_dynamics
+    from racing_lib.model import jacobians, spatial_dynamics
 
     st = settings or CurvatureSettings()
     params, pedal, options = default_model_inputs(params, None, options)
@@ -540,121 +421,234 @@ def solve_curvature(
     wheelbase = float(params.l_f + params.l_r)
     jac = jacobians(params, options, "spatial").map(n)
     f_s = spatial_dynamics(params, options).map(n)
-    lat = [int(getattr(X, name)) for name in _LAT]
 
     # Start: the centerline at its speed profile.
-    e_y = np.zeros(n)
-    e_psi = np.zeros(n)
-    kappa_line, s_line, len_line = grid.kappa, grid.s, grid.length
-    prof: Any = None
-    history: list[float] = []
-    lap_times: list[float] = []
-    qp_time = 0.0
-    status = "not_run"
-    success = False
-    v_y = np.zeros(n)
-    sol = None
-    v_hat_prev: np.ndarray | None = None
-    it = 0
-    prof = speed_profile(
-        s_line, kappa_line, params, pedal, grid.theta, st.v_top, options, length=len_line
+    run = _LineIteration(
+        e_y=np.zeros(n), e_psi=np.zeros(n), kappa=grid.kappa, s=grid.s, length=grid.length
     )
-    lap_times.append(prof.lap_time)
-    best: tuple[float, Any] | None = None
-    since_best = 0
-    for it in range(1, st.max_iterations + 1):  # noqa: B007 - reported
-        v_new = st.speed_fraction * prof.v
-        # Under-relax the speed estimate: the line and its speed profile feed each other, and
-        # taking the new profile whole makes the line swing by a few decimetres forever.
-        v_hat = v_new if v_hat_prev is None else v_hat_prev + st.relaxation * (v_new - v_hat_prev)
-        v_hat_prev = v_hat
-        # Linearize at steady cornering on the current line at v_hat: with the tyres on the
-        # stable side of their peak the linearized lateral dynamics are stable.
-        v_y, r_bar, delta_bar = steady_cornering(v_hat, kappa_line, params)
-        # Longitudinal input that makes v_x follow v_hat between nodes (v dv/ds).
-        a_bar = st.speed_fraction**2 * prof.a_x
-        xi_bar = np.zeros((6, n))
-        xi_bar[X.VX] = v_hat
-        xi_bar[X.VY] = v_y
-        xi_bar[X.R] = r_bar
-        xi_bar[X.EPSI] = e_psi
-        xi_bar[X.EY] = e_y
-        xi_bar[X.S] = grid.s
-        u_bar = np.vstack([delta_bar, a_bar])
-        args = (xi_bar, u_bar, grid.kappa[None, :], grid.theta[None, :])
-        A_all, B_all = jac(*args)
-        A_all = np.asarray(A_all).reshape(6, n, 6).transpose(1, 0, 2)
-        B_all = np.asarray(B_all).reshape(6, n, 2).transpose(1, 0, 2)
-        f_bar = np.asarray(f_s(*args)).T
-        A = A_all[:, lat][:, :, lat]
-        B = B_all[:, lat, 0]
-        # v_x and a_x stay at their bar values, so only the lateral deviations enter:
-        # f ~= f_bar + A (xi - xi_bar) + B (delta - delta_bar).
-        xi_lat = xi_bar[lat].T
-        f0 = f_bar[:, lat] - np.einsum("kij,kj->ki", A, xi_lat) - B * delta_bar[:, None]
-        status, new, t_qp = _lateral_qp(A, B, f0, grid, v_hat, wheelbase, st, e_y)
-        qp_time += t_qp
+    run.prof = _line_profile(run, grid, params, pedal, options, st)
+    run.lap_times.append(run.prof.lap_time)
+    for it in range(1, st.max_iterations + 1):
+        run.it = it
+        v_hat = _next_v_hat(run, st)
+        A, B, f0 = _linearized_lateral(jac, f_s, grid, params, run, v_hat, st)
+        status, new, t_qp = _lateral_qp(A, B, f0, grid, v_hat, wheelbase, st, run.e_y)
+        run.status = status
+        run.qp_time += t_qp
         if new is None:
-            msg = (
-                f"curvature QP iteration {it}: {st.solver} (via cvxpy) returned status "
-                f"'{status}' on track {getattr(track, 'name', '?')!r}. Try: check that the track "
-                "is wide enough for the car; another node spacing (plan(..., spacing=...); on "
-                "the command line --spacing 4); or, in CurvatureSettings, a larger delta_max or "
-                "a lower speed_fraction."
-            )
             if raise_on_failure:
-                raise PlanningError(msg)
+                raise PlanningError(_qp_failure_message(it, status, st, track))
             break
-        change = float(np.max(np.abs(new[:, QPVar.EY] - e_y)))
-        history.append(change)
-        if sol is not None and it > st.full_steps:
-            # Damped fixed-point step: the line and its speed estimate feed each other, and on some
-            # tracks the undamped iteration swings between two lines by a metre or two.
-            new = sol + st.line_step * (new - sol)
-        sol = new
-        v_y, e_psi, e_y = new[:, QPVar.VY], new[:, QPVar.EPSI], new[:, QPVar.EY]
-        kappa_line, s_line, len_line = grid.line_curvature(e_y)
-        prof = speed_profile(
-            s_line, kappa_line, params, pedal, grid.theta, st.v_top, options, length=len_line
-        )
-        lap_times.append(prof.lap_time)
-        if best is None or prof.lap_time < best[0] - st.lap_tol:
-            since_best = 0
-        else:
-            since_best += 1
-        if best is None or prof.lap_time < best[0]:
-            best = (prof.lap_time, (sol, e_y, e_psi, kappa_line, s_line, len_line, prof))
-        if change < st.tol:
-            status, success = "converged", True
-            break
-        if since_best >= st.patience:
-            # The fixed-point iteration is not a descent method on the lap time: once the line
-            # stops getting faster it wanders between nearly equivalent lines (e.g. in long
-            # constant-radius corners, where many lines have the same curvature).
-            status, success = "settled", True
+        if _move_line(run, new, grid, params, pedal, options, st):
             break
     else:
-        status = "max_iterations"
+        run.status = "max_iterations"
+    return _curvature_result(run, grid, track, CarModel(params, options), st, t_start)
 
-    if sol is None or best is None:
+
+@dataclass
+class _LineIteration:
+    """The state the curvature iteration carries from one QP to the next.
+
+    Attributes
+    ----------
+    e_y, e_psi : ndarray (N,)
+        The current line: lateral offset (m) and heading error (rad) on the grid.
+    kappa, s : ndarray (N,)
+        The current line's curvature (1/m) and arc length (m) at the nodes.
+    length : float
+        The current line's length, m.
+    prof : SpeedProfile or None
+        The current line's speed profile.
+    sol : ndarray (N, 5) or None
+        The last (damped) QP solution, columns as :class:`QPVar`.
+    v_hat_prev : ndarray (N,) or None
+        The last speed estimate v_hat, m/s.
+    history, lap_times, qp_time, it, status, success
+        As in :class:`CurvatureResult` (``it``: the iterations done).
+    best, since_best
+        (lap time in s, (sol, e_y, e_psi, kappa, s, length, prof)) of the fastest line so far,
+        and the iterations since the lap time last improved by more than ``lap_tol``.
+    """
+
+    e_y: np.ndarray
+    e_psi: np.ndarray
+    kappa: np.ndarray
+    s: np.ndarray
+    length: float
+    prof: Any = None
+    sol: np.ndarray | None = None
+    v_hat_prev: np.ndarray | None = None
+    history: list[float] = field(default_factory=list)
+    lap_times: list[float] = field(default_factory=list)
+    qp_time: float = 0.0
+    it: int = 0
+    status: str = "not_run"
+    success: bool = False
+    best: tuple[float, Any] | None = None
+    since_best: int = 0
+
+
+def _line_profile(
+    run: _LineIteration,
+    grid: TrackGrid,
+    params: ModelParams,
+    pedal: Any,
+    options: Any,
+    st: CurvatureSettings,
+) -> Any:
+    """The speed profile (:func:`speed_profile`) of the iteration's current line."""
+    return speed_profile(
+        run.s, run.kappa, params, pedal, grid.theta, st.v_top, options, length=run.length
+    )
+
+
+def _next_v_hat(run: _LineIteration, st: CurvatureSettings) -> np.ndarray:
+    """The next speed estimate v_hat (m/s): a fraction of the line's profile, under-relaxed."""
+    v_new = st.speed_fraction * run.prof.v
+    # Under-relax the speed estimate: the line and its speed profile feed each other, and
+    # taking the new profile whole makes the line swing by a few decimetres forever.
+    prev = run.v_hat_prev
+    v_hat = v_new if prev is None else prev + st.relaxation * (v_new - prev)
+    run.v_hat_prev = v_hat
+    return v_hat
+
+
+def _linearized_lateral(
+    jac: Any,
+    f_s: Any,
+    grid: TrackGrid,
+    params: ModelParams,
+    run: _LineIteration,
+    v_hat: np.ndarray,
+    st: CurvatureSettings,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The lateral dynamics linearized at steady cornering on the current line at v_hat (m/s).
+
+    ``jac`` and ``f_s`` are the spatial model's Jacobians and right-hand side mapped over the N
+    nodes; ``run`` holds the current line (e_y in m, e_psi in rad) and its speed profile. Returns
+    A (N, 4, 4), B (N, 4) and f0 (N, 4) with d xi / ds ~= A xi + B delta + f0 (per m) for the
+    lateral state xi (as ``_LAT``).
+    """
+    from racing_lib.model import X
+
+    n = grid.n
+    lat = [int(getattr(X, name)) for name in _LAT]
+    # Linearize at steady cornering on the current line at v_hat: with the tyres on the
+    # stable side of their peak the linearized lateral dynamics are stable.
+    v_y, r_bar, delta_bar = steady_cornering(v_hat, run.kappa, params)
+    # Longitudinal input that makes v_x follow v_hat between nodes (v dv/ds).
+    a_bar = st.speed_fraction**2 * run.prof.a_x
+    xi_bar = np.zeros((6, n))
+    xi_bar[X.VX] = v_hat
+    xi_bar[X.VY] = v_y
+    xi_bar[X.R] = r_bar
+    xi_bar[X.EPSI] = run.e_psi
+    xi_bar[X.EY] = run.e_y
+    xi_bar[X.S] = grid.s
+    u_bar = np.vstack([delta_bar, a_bar])
+    args = (xi_bar, u_bar, grid.kappa[None, :], grid.theta[None, :])
+    A_all, B_all = jac(*args)
+    A_all = np.asarray(A_all).reshape(6, n, 6).transpose(1, 0, 2)
+    B_all = np.asarray(B_all).reshape(6, n, 2).transpose(1, 0, 2)
+    f_bar = np.asarray(f_s(*args)).T
+    A = A_all[:, lat][:, :, lat]
+    B = B_all[:, lat, 0]
+    # v_x and a_x stay at their bar values, so only the lateral deviations enter:
+    # f ~= f_bar + A (xi - xi_bar) + B (delta - delta_bar).
+    xi_lat = xi_bar[lat].T
+    f0 = f_bar[:, lat] - np.einsum("kij,kj->ki", A, xi_lat) - B * delta_bar[:, None]
+    return A, B, f0
+
+
+def _qp_failure_message(it: int, status: str, st: CurvatureSettings, track: Any) -> str:
+    """What went wrong in QP iteration ``it`` (solver status ``status``) and what to try."""
+    return (
+        f"curvature QP iteration {it}: {st.solver} (via cvxpy) returned status "
+        f"'{status}' on track {getattr(track, 'name', '?')!r}. Try: check that the track "
+        "is wide enough for the car; another node spacing (plan(..., spacing=...); on "
+        "the command line --spacing 4); or, in CurvatureSettings, a larger delta_max or "
+        "a lower speed_fraction."
+    )
+
+
+def _move_line(
+    run: _LineIteration,
+    new: np.ndarray,
+    grid: TrackGrid,
+    params: ModelParams,
+    pedal: Any,
+    options: Any,
+    st: CurvatureSettings,
+) -> bool:
+    """Move the line towards the QP solution ``new`` (N, 5), profile it, keep the fastest.
+
+    Returns True when the iteration stops: 'converged' (the line moved less than ``st.tol``, m)
+    or 'settled' (no lap-time gain for ``st.patience`` iterations); ``run`` records which.
+    """
+    change = float(np.max(np.abs(new[:, QPVar.EY] - run.e_y)))
+    run.history.append(change)
+    if run.sol is not None and run.it > st.full_steps:
+        # Damped fixed-point step: the line and its speed estimate feed each other, and on some
+        # tracks the undamped iteration swings between two lines by a metre or two.
+        new = run.sol + st.line_step * (new - run.sol)
+    run.sol = new
+    run.e_psi, run.e_y = new[:, QPVar.EPSI], new[:, QPVar.EY]
+    run.kappa, run.s, run.length = grid.line_curvature(run.e_y)
+    prof = run.prof = _line_profile(run, grid, params, pedal, options, st)
+    run.lap_times.append(prof.lap_time)
+    best = run.best
+    if best is None or prof.lap_time < best[0] - st.lap_tol:
+        run.since_best = 0
+    else:
+        run.since_best += 1
+    if best is None or prof.lap_time < best[0]:
+        line = (run.sol, run.e_y, run.e_psi, run.kappa, run.s, run.length, prof)
+        run.best = (prof.lap_time, line)
+    if change < st.tol:
+        run.status, run.success = "converged", True
+        return True
+    if run.since_best >= st.patience:
+        # The fixed-point iteration is not a descent method on the lap time: once the line
+        # stops getting faster it wanders between nearly equivalent lines (e.g. in long
+        # constant-radius corners, where many lines have the same curvature).
+        run.status, run.success = "settled", True
+        return True
+    return False
+
+
+def _curvature_result(
+    run: _LineIteration,
+    grid: TrackGrid,
+    track: Any,
+    model: CarModel,
+    st: CurvatureSettings,
+    t_start: float,
+) -> CurvatureResult:
+    """The fastest line of the iteration, driven at its full speed profile, as the result.
+
+    Raises
+    ------
+    PlanningError
+        If no QP was solved.
+    """
+    if run.sol is None or run.best is None:
         raise PlanningError(
             f"curvature QP: {st.solver} (via cvxpy) found no solution in the first iteration "
-            f"(status '{status}'); check the track widths and the steering limit."
+            f"(status '{run.status}'); check the track widths and the steering limit."
         )
     # Keep the fastest line found (by its speed-profile lap time).
-    sol, e_y, e_psi, kappa_line, s_line, len_line, prof = best[1]
-    traj = _trajectory_from_line(
-        grid, e_y, e_psi, sol, prof, kappa_line, len_line, track, CarModel(params, options)
-    )
+    sol, e_y, e_psi, kappa_line, s_line, len_line, prof = run.best[1]
+    traj = _trajectory_from_line(grid, e_y, e_psi, sol, prof, kappa_line, len_line, track, model)
     return CurvatureResult(
-        success=success,
-        status=status,
-        iterations=it,
+        success=run.success,
+        status=run.status,
+        iterations=run.it,
         solve_time=time.perf_counter() - t_start,
-        qp_time=qp_time,
+        qp_time=run.qp_time,
         trajectory=traj,
-        history=history,
-        lap_times=lap_times,
+        history=run.history,
+        lap_times=run.lap_times,
         e_y=e_y,
         e_psi=e_psi,
         v_y=sol[:, QPVar.VY],

@@ -137,8 +137,6 @@ def pedal_accel_limits(pedal_map: Any) -> AccelLimits | None:
     )
 
 
-# long function: the forward and backward passes are closures over the tabulated pedal limits and
-#   the node lists, so the per-node loops read local names only
 def speed_profile(
     s: ArrayLike,
     kappa: ArrayLike,
@@ -206,6 +204,54 @@ def speed_profile(
     >>> round(float(prof.v[0]), 2)  # sqrt(mu g R) = sqrt(1.25 * 9.81 * 50); drag is tiny here
     24.76
     """
+    s, kappa, ds, length = _checked_path(s, kappa, closed, length)
+    n = s.size
+    theta = np.zeros(n) if theta is None else np.broadcast_to(np.asarray(theta, float), (n,))
+    a_z = np.zeros(n) if a_z is None else np.broadcast_to(np.asarray(a_z, float), (n,))
+    if params is None:
+        params = _DEFAULTS
+    car = _point_mass(params, options, v_top)
+    if pedal_map is None:
+        pedal_map = getattr(params, "pedal", None)
+    limits = pedal_accel_limits(pedal_map)
+    road = _road(params, car, kappa, theta, a_z, ds)
+    forward, backward = _pass_functions(road, car, limits)
+    if closed:
+        v, success, passes = _closed_passes(road, forward, backward, max_passes, tol)
+    else:
+        v, success, passes = _open_passes(road, forward, backward, v_start), True, 1
+    return _profile(s, v, road, closed, length, success, passes)
+
+
+def _checked_path(
+    s: ArrayLike, kappa: ArrayLike, closed: bool, length: float | None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, float | None]:
+    """The nodes of :func:`speed_profile` as flat arrays, checked, with their spacing.
+
+    Parameters
+    ----------
+    s : array_like, shape (N,)
+        Arc length of the nodes, m.
+    kappa : array_like, shape (N,)
+        Curvature at the nodes, 1/m.
+    closed : bool
+        True for a closed loop (the last spacing wraps to the first node).
+    length : float or None
+        Length of a closed path, m (None: last node + one spacing).
+
+    Returns
+    -------
+    s (m), kappa (1/m) : ndarray (N,)
+    ds : ndarray (N,) on a closed path, (N-1,) on an open one
+        Distance from each node to the next, m.
+    length : float or None
+        The closed path's length, m (as given on an open path).
+
+    Raises
+    ------
+    PlanningError
+        Fewer than 3 nodes, a curvature count that differs, non-finite values, or s not increasing.
+    """
     s = np.asarray(s, dtype=float).ravel()
     kappa = np.asarray(kappa, dtype=float).ravel()
     n = s.size
@@ -228,11 +274,51 @@ def speed_profile(
                 f"path length {length:.3f} m is not beyond the last node; pass the loop length."
             )
         ds = np.append(ds, gap)
-    theta = np.zeros(n) if theta is None else np.broadcast_to(np.asarray(theta, float), (n,))
-    a_z = np.zeros(n) if a_z is None else np.broadcast_to(np.asarray(a_z, float), (n,))
+    return s, kappa, ds, length
 
-    if params is None:
-        params = _DEFAULTS
+
+@dataclass(frozen=True)
+class _PointMass:
+    """The car as :func:`speed_profile` sees it: friction, mass, resistances and top speed.
+
+    Attributes
+    ----------
+    mu : float
+        Friction coefficient, dimensionless.
+    mass : float
+        Mass, kg.
+    c_xw : float
+        Drag coefficient (0 with drag switched off), kg/m.
+    c_rr : float
+        Rolling resistance coefficient, dimensionless.
+    v_top : float
+        Top speed, m/s.
+    """
+
+    mu: float
+    mass: float
+    c_xw: float
+    c_rr: float
+    v_top: float
+
+
+def _point_mass(params: Any, options: Any, v_top: float | None) -> _PointMass:
+    """The point-mass constants of ``params`` (see :func:`speed_profile`), checked.
+
+    Parameters
+    ----------
+    params : ModelParams or alike
+        Planning parameters (``mu``, ``m`` in kg, ``C_xw`` in kg/m, ``c_rr``).
+    options : ModelOptions or None
+        ``options.drag`` switches the drag off when false.
+    v_top : float or None
+        Top speed, m/s (None: :data:`DEFAULT_V_TOP`).
+
+    Raises
+    ------
+    PlanningError
+        If mu, the mass or the top speed is not positive.
+    """
     mu = _param(params, "mu")
     mass = _param(params, "m")
     drag_on = True if options is None else bool(getattr(options, "drag", True))
@@ -245,10 +331,67 @@ def speed_profile(
             f"speed_profile needs positive mu, mass and top speed, got mu={mu}, m={mass}, "
             f"v_top={v_top}; check the parameter set."
         )
-    if pedal_map is None:
-        pedal_map = getattr(params, "pedal", None)
-    limits = pedal_accel_limits(pedal_map)
+    return _PointMass(mu=mu, mass=mass, c_xw=c_xw, c_rr=c_rr, v_top=v_top)
 
+
+@dataclass(frozen=True)
+class _Road:
+    """Per-node quantities of the passes of :func:`speed_profile`.
+
+    Attributes
+    ----------
+    ds : ndarray
+        Distance from each node to the next, m.
+    theta : ndarray (N,)
+        Road grade, rad.
+    g_eff : ndarray (N,)
+        Vertical acceleration pressing the car onto the road, m/s^2.
+    abs_k : ndarray (N,)
+        Absolute curvature, 1/m.
+    grip : ndarray (N,)
+        Radius of the friction circle, m/s^2.
+    v_max : ndarray (N,)
+        Cornering limit capped at the top speed, m/s.
+    """
+
+    ds: np.ndarray
+    theta: np.ndarray
+    g_eff: np.ndarray
+    abs_k: np.ndarray
+    grip: np.ndarray
+    v_max: np.ndarray
+
+
+def _road(
+    params: Any,
+    car: _PointMass,
+    kappa: np.ndarray,
+    theta: np.ndarray,
+    a_z: np.ndarray,
+    ds: np.ndarray,
+) -> _Road:
+    """The friction circle and the cornering speed limit at each node.
+
+    Parameters
+    ----------
+    params : ModelParams or alike
+        Read: the Pacejka peak factors ``D_f`` and ``D_r`` (dimensionless).
+    car : _PointMass
+        Friction coefficient and top speed (m/s).
+    kappa : ndarray (N,)
+        Curvature, 1/m.
+    theta : ndarray (N,)
+        Road grade, rad.
+    a_z : ndarray (N,)
+        Extra vertical acceleration, m/s^2.
+    ds : ndarray
+        Distance from each node to the next, m.
+
+    Raises
+    ------
+    PlanningError
+        If the grade or the vertical acceleration lifts the car off the road.
+    """
     g_eff = G * np.cos(theta) + a_z  # vertical acceleration pressing the car onto the road, m/s^2
     if np.any(g_eff <= 0):
         raise PlanningError("the road's grade or vertical acceleration lifts the car off the road.")
@@ -257,11 +400,44 @@ def speed_profile(
     # with mu g alone asked the car for 12.3 m/s^2 where it had 10.3 and slid wide when braking
     # into corners.
     d_peak = min(_param(params, "D_f"), _param(params, "D_r"))
-    grip = mu * d_peak * g_eff  # friction-circle radius, m/s^2
+    grip = car.mu * d_peak * g_eff  # friction-circle radius, m/s^2
     abs_k = np.abs(kappa)
     with np.errstate(divide="ignore"):
         v_max = np.where(abs_k > 1e-9, np.sqrt(grip / np.maximum(abs_k, 1e-12)), np.inf)
-    v_max = np.minimum(v_max, v_top)
+    v_max = np.minimum(v_max, car.v_top)
+    return _Road(ds=ds, theta=theta, g_eff=g_eff, abs_k=abs_k, grip=grip, v_max=v_max)
+
+
+_Pass = Callable[[float, int, int, list[float]], float]
+
+
+def _pass_functions(
+    road: _Road, car: _PointMass, limits: AccelLimits | None
+) -> tuple[_Pass, _Pass]:
+    """The forward (accelerating) and backward (braking) passes over the nodes.
+
+    The passes are closures over the tabulated pedal limits and the node lists, so their per-node
+    loops read local names only.
+
+    Parameters
+    ----------
+    road : _Road
+        Per-node friction circle, grade and speed limit.
+    car : _PointMass
+        Mass (kg), drag (kg/m), rolling resistance and top speed (m/s).
+    limits : callable or None
+        Pedal-map acceleration limits v -> (a_min, a_max), m/s^2 (None: the tyres only).
+
+    Returns
+    -------
+    forward, backward : callable
+        ``f(v0, start, steps, out) -> v``: from speed ``v0`` (m/s) at node ``start``, walk
+        ``steps`` nodes (forward: up, backward: down, wrapping), lowering ``out`` (m/s) in place
+        to what the car can reach; returns the last speed, m/s.
+    """
+    n = road.abs_k.size
+    c_xw, mass, c_rr = car.c_xw, car.mass, car.c_rr
+    g_eff, theta, abs_k, grip = road.g_eff, road.theta, road.abs_k, road.grip
 
     def resist(v: float, k: int) -> float:
         # Accelerations that slow the car regardless of the pedal: drag, rolling resistance, grade.
@@ -274,7 +450,7 @@ def speed_profile(
 
     # Tabulate the pedal-map limits once (one vectorized call) and interpolate them in the passes:
     # calling the map per node would dominate the run time.
-    v_tab_step = 1.25 * float(v_top) / 255.0
+    v_tab_step = 1.25 * float(car.v_top) / 255.0
     if limits is not None:
         lo_tab, hi_tab = limits(np.arange(257) * v_tab_step)
         lo_list = np.asarray(lo_tab, float).ravel().tolist()
@@ -299,8 +475,8 @@ def speed_profile(
             a_tyre = min(a_tyre, -table(lo_list, v))
         return a_tyre + resist(v, k)
 
-    v_max_list = v_max.tolist()
-    ds_list = ds.tolist()
+    v_max_list = road.v_max.tolist()
+    ds_list = road.ds.tolist()
 
     def forward(v0: float, start: int, steps: int, out: list[float]) -> float:
         v = v0
@@ -322,44 +498,98 @@ def speed_profile(
             out[kp] = v
         return v
 
-    success = True
-    passes = 1
-    if closed:
-        # Start where the path is slowest: the true profile cannot exceed v_max there, and the
-        # passes from that node are close to the periodic answer after one lap.
-        k0 = int(np.argmin(v_max))
-        fwd = list(v_max_list)
-        v_wrap = fwd[k0]
-        for passes in range(1, max_passes + 1):  # noqa: B007 - passes is reported
-            fwd[k0] = min(fwd[k0], v_wrap)
-            v_new = forward(fwd[k0], k0, n, fwd)
-            if abs(v_new - v_wrap) < tol and passes > 1:
-                break
-            v_wrap = v_new
-        else:
-            success = False
-        bwd = list(fwd)
-        v_wrap = bwd[k0]
-        for _ in range(max_passes):
-            v_new = backward(bwd[k0], k0, n, bwd)
-            if abs(v_new - v_wrap) < tol:
-                break
-            v_wrap = v_new
-        else:
-            success = False
-        v = np.asarray(bwd)
-    else:
-        prof = list(v_max_list)
-        prof[0] = min(prof[0], v_max_list[0] if v_start is None else float(v_start))
-        forward(prof[0], 0, n - 1, prof)
-        backward(prof[-1], n - 1, n - 1, prof)
-        v = np.asarray(prof)
+    return forward, backward
 
+
+def _closed_passes(
+    road: _Road, forward: _Pass, backward: _Pass, max_passes: int, tol: float
+) -> tuple[np.ndarray, bool, int]:
+    """The periodic profile of a flying lap: wrap-around passes until the loop closes.
+
+    Parameters
+    ----------
+    road : _Road
+        Per-node speed limit ``v_max``, m/s.
+    forward, backward : callable
+        The passes of :func:`_pass_functions`.
+    max_passes : int
+        Maximum wrap-around passes in each direction.
+    tol : float
+        Settling tolerance of the speed where the loop closes, m/s.
+
+    Returns
+    -------
+    v : ndarray (N,)
+        Speed at the nodes, m/s.
+    success : bool
+        True when both directions settled.
+    passes : int
+        Number of forward passes done.
+    """
+    n = road.v_max.size
+    success = True
+    passes = 1  # what is reported if max_passes < 1
+    # Start where the path is slowest: the true profile cannot exceed v_max there, and the
+    # passes from that node are close to the periodic answer after one lap.
+    k0 = int(np.argmin(road.v_max))
+    fwd = road.v_max.tolist()
+    v_wrap = fwd[k0]
+    for passes in range(1, max_passes + 1):  # noqa: B007 - passes is reported
+        fwd[k0] = min(fwd[k0], v_wrap)
+        v_new = forward(fwd[k0], k0, n, fwd)
+        if abs(v_new - v_wrap) < tol and passes > 1:
+            break
+        v_wrap = v_new
+    else:
+        success = False
+    bwd = list(fwd)
+    v_wrap = bwd[k0]
+    for _ in range(max_passes):
+        v_new = backward(bwd[k0], k0, n, bwd)
+        if abs(v_new - v_wrap) < tol:
+            break
+        v_wrap = v_new
+    else:
+        success = False
+    return np.asarray(bwd), success, passes
+
+
+def _open_passes(road: _Road, forward: _Pass, backward: _Pass, v_start: float | None) -> np.ndarray:
+    """The profile of an open path: one forward pass from ``v_start`` (m/s), one backward pass.
+
+    Returns the speed at the nodes, m/s (``v_start`` None: v_max at the first node).
+    """
+    v_max_list = road.v_max.tolist()
+    n = len(v_max_list)
+    prof = list(v_max_list)
+    prof[0] = min(prof[0], v_max_list[0] if v_start is None else float(v_start))
+    forward(prof[0], 0, n - 1, prof)
+    backward(prof[-1], n - 1, n - 1, prof)
+    return np.asarray(prof)
+
+
+def _profile(
+    s: np.ndarray,
+    v: np.ndarray,
+    road: _Road,
+    closed: bool,
+    length: float | None,
+    success: bool,
+    passes: int,
+) -> SpeedProfile:
+    """The :class:`SpeedProfile` of the speeds ``v`` (m/s) at the nodes ``s`` (m), checked.
+
+    Raises
+    ------
+    PlanningError
+        If a speed is not positive and finite (the car cannot move somewhere).
+    """
     if np.any(v <= 0) or not np.all(np.isfinite(v)):
         raise PlanningError(
             "speed_profile found no positive speed: the car cannot overcome drag, grade or rolling "
             "resistance somewhere; check the friction coefficient and the pedal map."
         )
+    ds = road.ds
     # Pairs of nodes (k, k+1); on a closed path the last pair wraps to the first node.
     v_pairs, v_next = (v, np.roll(v, -1)) if closed else (v[:-1], v[1:])
     dt = segment_times(ds, v_pairs, v_next)
@@ -370,7 +600,7 @@ def speed_profile(
         s=s,
         v=v,
         a_x=a_x,
-        v_max=v_max,
+        v_max=road.v_max,
         lap_time=float(np.sum(dt)),
         success=success,
         iterations=passes,

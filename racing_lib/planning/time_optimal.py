@@ -52,6 +52,7 @@ from __future__ import annotations
 import dataclasses
 import time
 from collections import OrderedDict
+from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -61,10 +62,10 @@ from racing_lib.model.car_model import CarModel
 from racing_lib.planning.curvature import (
     CurvatureResult,
     CurvatureSettings,
-    TrackGrid,
     solve_curvature,
     steady_cornering,
 )
+from racing_lib.planning.grid import TrackGrid
 from racing_lib.planning.speed import speed_profile
 from racing_lib.planning.time_optimal_nlp import (
     NLP_SCALE,
@@ -333,8 +334,6 @@ def ipopt_solver(
         ) from None
 
 
-# long function: the NLP's set-up, solve and fallbacks, read against the paper's formulation in one
-#   place
 def solve_time_optimal(
     track: Any,
     params: ModelParams | None = None,
@@ -392,8 +391,71 @@ def solve_time_optimal(
     params, _, options = default_model_inputs(params, None, options)
     v_top = float(st.v_top) if st.v_top is not None else 190.0 / 3.6
     grid = TrackGrid.from_track(track, st.spacing, st.car_width, st.margin)
+    _check_friction(track, grid, params, options, st, v_top)
+    if isinstance(start, str) and start == "warm":
+        cs = curvature_settings or CurvatureSettings()
+        cs = dataclasses.replace(
+            cs, spacing=st.spacing, car_width=st.car_width, margin=st.margin, v_top=st.v_top
+        )
+        start = solve_curvature(track, params, options, cs, grid=grid)
+    z0, kind = _initial_guess(grid, params, start, cold_speed)
 
-    # Cheap feasibility checks before any solver runs.
+    prob, build_time = _problem(grid, track, params, options, st)
+    solves = _solve_with_ax_limits(prob, grid, params, st, z0, v_top)
+    if not solves.success and raise_on_failure:
+        raise PlanningError(
+            f"time-optimal NLP on track {getattr(track, 'name', '?')!r}: IPOPT returned "
+            f"'{solves.status}' after {sum(solves.iters)} iterations ({kind} start). Try: "
+            f"{_failure_advice(kind, st, solves.status)}."
+        )
+    traj, lap_time, solution = _read_solution(prob, grid, solves, track, options)
+    return TimeOptimalResult(
+        success=solves.success,
+        status=solves.status,
+        iterations=int(sum(solves.iters)),
+        solve_time=solves.solve_time,
+        build_time=build_time,
+        outer_iterations=solves.outer,
+        trajectory=traj,
+        lap_time=lap_time,
+        start=kind,
+        iterations_per_solve=solves.iters,
+        grid=grid,
+        solution=solution,
+        evaluation_time=solves.evaluation_time,
+    )
+
+
+def _check_friction(
+    track: Any,
+    grid: TrackGrid,
+    params: ModelParams,
+    options: Any,
+    st: TimeOptimalSettings,
+    v_top: float,
+) -> None:
+    """Cheap feasibility checks before any solver runs: enough friction to reach ``st.v_min``.
+
+    Parameters
+    ----------
+    track : Track
+        The track (its name goes into the message).
+    grid : TrackGrid
+        The planning grid.
+    params : ModelParams
+        Planning parameters (``mu``, dimensionless).
+    options : ModelOptions
+        Model effects, for the speed profile.
+    st : TimeOptimalSettings
+        ``mu_min`` (dimensionless) and ``v_min`` (m/s).
+    v_top : float
+        Top speed, m/s.
+
+    Raises
+    ------
+    PlanningError
+        If mu is below ``st.mu_min`` or the speed profile falls below ``st.v_min`` somewhere.
+    """
     if not params.mu >= st.mu_min:
         raise PlanningError(
             f"friction too low: mu = {params.mu} is below {st.mu_min} (even ice is about 0.1, dry "
@@ -414,17 +476,46 @@ def solve_time_optimal(
             "coefficient (dry asphalt: about 1.0-1.3) or lower v_min."
         )
 
-    if isinstance(start, str) and start == "warm":
-        cs = curvature_settings or CurvatureSettings()
-        cs = dataclasses.replace(
-            cs, spacing=st.spacing, car_width=st.car_width, margin=st.margin, v_top=st.v_top
-        )
-        start = solve_curvature(track, params, options, cs, grid=grid)
-    z0, kind = _initial_guess(grid, params, start, cold_speed)
 
-    prob, build_time = _problem(grid, track, params, options, st)
+@dataclasses.dataclass
+class _Solves:
+    """What the IPOPT solves of :func:`_solve_with_ax_limits` ended with.
+
+    Attributes
+    ----------
+    z : ndarray (7, N)
+        The last solution in model units (rows as ``NLP_VARS``); the start if none was read.
+    status : str
+        IPOPT's last return status (with a note if the a_x limits did not settle).
+    success : bool
+        True if the last solve succeeded (and the a_x limits settled).
+    iters : list of int
+        IPOPT iterations of each solve.
+    solve_time, evaluation_time : float
+        Wall time in IPOPT and in its function evaluations, s.
+    outer : int
+        Number of solves (outer iterations on the a_x limits).
+    """
+
+    z: np.ndarray
+    status: str = "not_run"
+    success: bool = False
+    iters: list[int] = dataclasses.field(default_factory=list)
+    solve_time: float = 0.0
+    evaluation_time: float = 0.0
+    outer: int = 0
+
+
+def _ax_limits_function(
+    grid: TrackGrid, params: ModelParams, st: TimeOptimalSettings
+) -> Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]:
+    """The bounds on a_x (m/s^2) at each node of an NLP solution z (7, N), in model units.
+
+    ``st.pedal_limits == "exact"``: the tyres' peak acceleration only; otherwise the pedal map at
+    the solution's states as well, capped by the tyres' peak (and the upper bound kept 1e-3 m/s^2
+    above the lower one).
+    """
     pedal = params.pedal
-    rows = {name: i for i, name in enumerate(_VARS)}
     grip = params.peak_acceleration()
 
     def ax_limits(z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -436,59 +527,93 @@ def solve_time_optimal(
         hi = np.minimum(np.asarray(hi, float), grip)
         return lo, np.maximum(hi, lo + 1e-3)
 
+    return ax_limits
+
+
+def _solve_with_ax_limits(
+    prob: _Problem,
+    grid: TrackGrid,
+    params: ModelParams,
+    st: TimeOptimalSettings,
+    z0: np.ndarray,
+    v_top: float,
+) -> _Solves:
+    """Solve the NLP, re-solving while the a_x limits at the solution move (``st.max_outer``).
+
+    Parameters
+    ----------
+    prob : _Problem
+        The built NLP.
+    grid : TrackGrid
+        The planning grid.
+    params : ModelParams
+        Planning parameters (pedal map, tyre peak).
+    st : TimeOptimalSettings
+        ``max_outer``, ``outer_tol`` (m/s^2) and ``pedal_limits``.
+    z0 : ndarray (7, N)
+        The initial guess in model units.
+    v_top : float
+        Top speed, m/s.
+
+    Returns
+    -------
+    _Solves
+    """
+    ax_limits = _ax_limits_function(grid, params, st)
     x0 = (z0 / _SCALE[:, None]).ravel(order="F")
     lo_prev, hi_prev = ax_limits(z0)
-    iters: list[int] = []
-    status = "not_run"
-    success = False
-    z = z0
-    solve_time = 0.0
-    evaluation_time = 0.0
-    outer = 0
+    out = _Solves(z=z0)
     settled = False
-    for outer in range(1, max(1, st.max_outer) + 1):  # noqa: B007 - reported
+    for outer in range(1, max(1, st.max_outer) + 1):
+        out.outer = outer
         lbx, ubx = prob.bounds(lo_prev, hi_prev, v_top)
         x0 = np.clip(x0, lbx, ubx)
         t0 = time.perf_counter()
         sol = prob.solver(x0=x0, lbx=lbx, ubx=ubx, lbg=prob.lbg, ubg=prob.ubg)
-        solve_time += time.perf_counter() - t0
+        out.solve_time += time.perf_counter() - t0
         stats = prob.solver.stats()
-        evaluation_time += sum(v for k, v in stats.items() if k.startswith("t_wall_nlp_"))
-        status = str(stats.get("return_status", "unknown"))
-        iters.append(int(stats.get("iter_count", -1)))
-        success = status in ("Solve_Succeeded", "Solved_To_Acceptable_Level")
+        out.evaluation_time += sum(v for k, v in stats.items() if k.startswith("t_wall_nlp_"))
+        out.status = str(stats.get("return_status", "unknown"))
+        out.iters.append(int(stats.get("iter_count", -1)))
+        out.success = out.status in ("Solve_Succeeded", "Solved_To_Acceptable_Level")
         x_opt = np.asarray(sol["x"], float).ravel()
         if not np.all(np.isfinite(x_opt)):
-            success = False
+            out.success = False
             break
-        z = x_opt.reshape(len(_VARS), grid.n, order="F") * _SCALE[:, None]
-        if not success:
+        out.z = x_opt.reshape(len(_VARS), grid.n, order="F") * _SCALE[:, None]
+        if not out.success:
             break
         x0 = x_opt
-        lo_new, hi_new = ax_limits(z)
+        lo_new, hi_new = ax_limits(out.z)
         change = max(np.max(np.abs(lo_new - lo_prev)), np.max(np.abs(hi_new - hi_prev)))
         lo_prev, hi_prev = lo_new, hi_new
         if change < st.outer_tol:
             settled = True
             break
-    if success and not settled and st.pedal_limits == "iterate":
+    if out.success and not settled and st.pedal_limits == "iterate":
         # The last solve used limits from the solve before it; accept if the plan respects them.
-        a = z[rows["AX"]]
+        a = out.z[_VARS.index("AX")]
         slack = 0.2  # m/s^2
         settled = bool(np.all(a >= lo_prev - slack) and np.all(a <= hi_prev + slack))
-        success = settled
+        out.success = settled
         if not settled:
-            status = f"{status} (a_x limits not settled after {outer} solves)"
+            out.status = f"{out.status} (a_x limits not settled after {out.outer} solves)"
+    return out
 
-    if not success and raise_on_failure:
-        raise PlanningError(
-            f"time-optimal NLP on track {getattr(track, 'name', '?')!r}: IPOPT returned "
-            f"'{status}' after {sum(iters)} iterations ({kind} start). Try: "
-            f"{_failure_advice(kind, st, status)}."
-        )
+
+def _read_solution(
+    prob: _Problem, grid: TrackGrid, solves: _Solves, track: Any, options: Any
+) -> tuple[Trajectory | None, float, dict[str, np.ndarray]]:
+    """The plan, its lap time (s) and the named NLP values of the last solution.
+
+    A solution with a non-finite value gives (None, NaN, {}); one whose s_dot is not positive
+    everywhere gives no trajectory. A trajectory that cannot be built is an error only for a
+    successful solve.
+    """
     traj = None
     lap_time = float("nan")
     solution: dict[str, np.ndarray] = {}
+    z = solves.z
     if np.all(np.isfinite(z)):
         lap, s_dot = prob.lap_fn((z / _SCALE[:, None]).ravel(order="F"))
         s_dot = np.asarray(s_dot, float).ravel()
@@ -499,25 +624,12 @@ def solve_time_optimal(
         solution["s_dot"] = s_dot
         if np.all(s_dot > 0):
             try:
-                traj = _trajectory(grid, z, dt, track, CarModel(params, options), status, iters)
+                model = CarModel(prob.params, options)
+                traj = _trajectory(grid, z, dt, track, model, solves.status, solves.iters)
             except PlanningError:
-                if success:
+                if solves.success:
                     raise
-    return TimeOptimalResult(
-        success=success,
-        status=status,
-        iterations=int(sum(iters)),
-        solve_time=solve_time,
-        build_time=build_time,
-        outer_iterations=outer,
-        trajectory=traj,
-        lap_time=lap_time,
-        start=kind,
-        iterations_per_solve=iters,
-        grid=grid,
-        solution=solution,
-        evaluation_time=evaluation_time,
-    )
+    return traj, lap_time, solution
 
 
 def _trajectory(

@@ -7,10 +7,7 @@ from typing import Any
 
 import numpy as np
 
-from racing_lib.planning.curvature import (
-    DEFAULT_CAR_WIDTH,
-    TrackGrid,
-)
+from racing_lib.planning.grid import DEFAULT_CAR_WIDTH, TrackGrid
 from racing_lib.planning.trajectory import Trajectory
 
 __all__ = ["TimeOptimalResult", "TimeOptimalSettings"]

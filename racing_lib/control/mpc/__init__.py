@@ -46,11 +46,7 @@ fast path) and :mod:`~racing_lib.control.mpc.qp_cvxpy` (the readable reference).
 
 from racing_lib.control.mpc.coupled import CoupledMPC
 from racing_lib.control.mpc.decoupled import DecoupledMPC
-from racing_lib.control.mpc.linearize import (
-    augment_steering_lag,
-    expm_batch,
-    steering_lag_coefficients,
-)
+from racing_lib.control.mpc.linearize import augment_steering_lag, expm_batch
 from racing_lib.control.mpc.qp_cvxpy import CvxpyTrackingQP
 from racing_lib.control.mpc.qp_osqp import TrackingQP
 from racing_lib.control.mpc.qp_problem import (
@@ -62,6 +58,7 @@ from racing_lib.control.mpc.qp_problem import (
     tracking_cost,
 )
 from racing_lib.control.mpc.settings import MX, MPCSettings
+from racing_lib.model.actuator import steering_lag_coefficients
 
 __all__ = [
     "MX",

@@ -15,7 +15,6 @@ import numpy as np
 from racing_lib.control.mpc.linearize import (
     continuous_linearization,
     packed_map,
-    steering_lag_coefficients,
     substep_linearization,
     unpack_linearization,
     zero_order_hold,
@@ -32,6 +31,7 @@ from racing_lib.geometry.spline import wrap_angle
 from racing_lib.interfaces import Command, Observation
 from racing_lib.jit import BufferedFunction
 from racing_lib.model import NU, NX, CarModel, U, X, discrete_linearization
+from racing_lib.model.actuator import steering_lag_coefficients
 from racing_lib.planning.trajectory import Trajectory
 
 __all__ = ["MPCBase", "PlanTable", "edge_band"]

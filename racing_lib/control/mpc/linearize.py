@@ -14,12 +14,12 @@ import numpy as np
 
 from racing_lib.jit import compiled_or_interpreted
 from racing_lib.model import NU, NX
+from racing_lib.model.actuator import steering_lag_coefficients
 
 __all__ = [
     "augment_steering_lag",
     "continuous_linearization",
     "expm_batch",
-    "steering_lag_coefficients",
     "substep_linearization",
     "zero_order_hold",
 ]
@@ -155,19 +155,6 @@ def zero_order_hold(A_c: np.ndarray, B_c: np.ndarray, c: np.ndarray, dt: float) 
     return Phi[:, :n, :n], Phi[:, :n, n : n + m], Phi[:, :n, n + m]
 
 
-def steering_lag_coefficients(tau: float, dt: float) -> tuple[float, float]:
-    """``(a, w)`` of the first-order steering lag ``delta_dot = (delta_cmd - delta) / tau``.
-
-    Over one period with the command held: ``delta_{k+1} = a delta_k + (1 - a) delta_cmd`` with
-    ``a = exp(-dt / tau)``, and the *mean* angle over the period is
-    ``w delta_k + (1 - w) delta_cmd`` with ``w = tau / dt (1 - a)``. ``tau = 0``: ``(0, 0)``.
-    """
-    if tau <= 0.0:
-        return 0.0, 0.0
-    a = math.exp(-dt / tau)
-    return a, tau / dt * (1.0 - a)
-
-
 def augment_steering_lag(
     A: np.ndarray, B: np.ndarray, d: np.ndarray, steer_col: int, tau: float, dt: float
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -176,8 +163,8 @@ def augment_steering_lag(
     The vehicle model sees the steering *angle*; the controller sets the *command*, which the
     actuator follows with a first-order lag. The vehicle's input over a period is approximated by
     the period's mean angle ``w delta_k + (1 - w) delta_cmd,k`` (coefficients from
-    :func:`steering_lag_coefficients`), and the angle itself becomes a state:
-    ``delta_{k+1} = a delta_k + (1 - a) delta_cmd,k``.
+    :func:`racing_lib.model.actuator.steering_lag_coefficients`), and the angle itself becomes a
+    state: ``delta_{k+1} = a delta_k + (1 - a) delta_cmd,k``.
 
     Parameters
     ----------

@@ -391,28 +391,14 @@ def run_ablation(
         A plan that did not converge.
     """
     selected = select_rows(rows, track)
-    n_trials = default_trials() if trials is None else int(trials)
-    if n_trials < 1:
-        raise ControlError(f"trials must be at least 1, got {trials}; the paper uses 10.")
-    if spacing is not None and not (math.isfinite(spacing) and spacing > 0):
-        raise PlanningError(f"plan spacing must be a positive number of m, got {spacing}.")
+    n_trials = _checked_trials(trials, spacing)
     seeds = [int(seed) + i for i in range(n_trials)]
     say = log or _quiet
     folder = FilePath(out_dir) if out_dir is not None else None
     track_objs = resolve_tracks(selected, tracks)
     memo: dict[str, tuple[Trajectory, dict]] = {}
     code = code_digests()
-    own_pool: ProcessPoolExecutor | None = None
-
-    def lap_executor() -> Executor | None:
-        nonlocal own_pool
-        if executor is not None:
-            return executor
-        if workers <= 1:
-            return None
-        if own_pool is None:
-            own_pool = ProcessPoolExecutor(max_workers=int(workers))
-        return own_pool
+    pool = _LapPool(executor, workers)
 
     from tqdm.auto import tqdm
 
@@ -441,45 +427,142 @@ def run_ablation(
                 bar.update(1)
                 continue
             traj, plan_info = _get_plan(row, trk, spacing, folder, memo, say, code)
-            spec = config_spec(row.config, trk, trajectory=traj, weights=weights)
-            pool = lap_executor()
-            where = "in this process" if pool is None else "in parallel"
-            say(f"{row.name}: {n_trials} trials {where} ...")
-            tic = time.perf_counter()
-            outcomes = run_trials(
-                functools.partial(_trial, spec, profile_seed=seeds[0]), seeds, pool
+            result = _drive_row(
+                row, trk, traj, plan_info, weights, seeds, key, key_inputs, pool, say
             )
-            result = _row_result(
-                row,
-                trk,
-                traj,
-                plan_info,
-                weights,
-                seeds,
-                outcomes,  # type: ignore[arg-type]
-                key,
-                key_inputs,
-                time.perf_counter() - tic,
-            )
-            if path is not None:
-                atomic_write_text(path, compact_json(result))
-                result_file = str(path)
-            else:
-                result_file = "not cached"
-            say(f"{row.name}: {row_summary(result)} -> {result_file}")
+            _save_row(result, path, row.name, say)
             results.append(result)
             if on_row is not None:
                 on_row(result, False)
             bar.update(1)
     except KeyboardInterrupt:
-        if own_pool is not None:
-            _stop_workers(own_pool)
+        if pool.own is not None:
+            _stop_workers(pool.own)
         raise
     finally:
         bar.close()
-        if own_pool is not None:
-            own_pool.shutdown(wait=True, cancel_futures=True)
+        if pool.own is not None:
+            pool.own.shutdown(wait=True, cancel_futures=True)
     return results
+
+
+def _checked_trials(trials: int | None, spacing: float | None) -> int:
+    """The number of seeded laps per row (``trials``, or :func:`default_trials`), checked.
+
+    Raises
+    ------
+    ControlError
+        If fewer than one trial is asked for.
+    PlanningError
+        If the plan spacing (m) is given and not a positive finite number.
+    """
+    n_trials = default_trials() if trials is None else int(trials)
+    if n_trials < 1:
+        raise ControlError(f"trials must be at least 1, got {trials}; the paper uses 10.")
+    if spacing is not None and not (math.isfinite(spacing) and spacing > 0):
+        raise PlanningError(f"plan spacing must be a positive number of m, got {spacing}.")
+    return n_trials
+
+
+class _LapPool:
+    """Where a run's laps go: the caller's executor, this process, or a pool made on first use.
+
+    Parameters
+    ----------
+    executor : Executor or None
+        The caller's executor (never shut down here).
+    workers : int
+        Without ``executor``: worker processes of the pool made when a row first needs one; 1 or
+        less drives the laps in this process.
+    """
+
+    def __init__(self, executor: Executor | None, workers: int) -> None:
+        self.executor = executor
+        self.workers = workers
+        #: The pool this run made (and must shut down), once made.
+        self.own: ProcessPoolExecutor | None = None
+
+    def get(self) -> Executor | None:
+        """The executor for the next row's laps (None: in this process)."""
+        if self.executor is not None:
+            return self.executor
+        if self.workers <= 1:
+            return None
+        if self.own is None:
+            self.own = ProcessPoolExecutor(max_workers=int(self.workers))
+        return self.own
+
+
+def _drive_row(
+    row: AblationRow,
+    trk: Track,
+    traj: Trajectory,
+    plan_info: dict,
+    weights: dict[str, float] | None,
+    seeds: list[int],
+    key: str,
+    key_inputs: dict[str, Any],
+    pool: _LapPool,
+    say: Callable[[str], None],
+) -> dict[str, Any]:
+    """Drive the seeded trials of one row on its plan and summarize them.
+
+    Parameters
+    ----------
+    row : AblationRow
+        The row.
+    trk : Track
+        Its track.
+    traj : Trajectory
+        Its plan.
+    plan_info : dict
+        What the row's result says of the plan.
+    weights : dict of str to float or None
+        The controller's weights (None: its defaults).
+    seeds : list of int
+        One seed per trial.
+    key, key_inputs
+        The row's cache key and what it was made from.
+    pool : _LapPool
+        Where the laps run.
+    say : callable
+        Receives one line of text per stage.
+
+    Returns
+    -------
+    dict
+        The row's JSON-ready result (see :func:`run_ablation`).
+    """
+    spec = config_spec(row.config, trk, trajectory=traj, weights=weights)
+    executor = pool.get()
+    where = "in this process" if executor is None else "in parallel"
+    say(f"{row.name}: {len(seeds)} trials {where} ...")
+    tic = time.perf_counter()
+    outcomes = run_trials(functools.partial(_trial, spec, profile_seed=seeds[0]), seeds, executor)
+    return _row_result(
+        row,
+        trk,
+        traj,
+        plan_info,
+        weights,
+        seeds,
+        outcomes,  # type: ignore[arg-type]
+        key,
+        key_inputs,
+        time.perf_counter() - tic,
+    )
+
+
+def _save_row(
+    result: dict[str, Any], path: FilePath | None, name: str, say: Callable[[str], None]
+) -> None:
+    """Write a row's result to its cache file (atomically; ``path`` None: not cached), say so."""
+    if path is not None:
+        atomic_write_text(path, compact_json(result))
+        result_file = str(path)
+    else:
+        result_file = "not cached"
+    say(f"{name}: {row_summary(result)} -> {result_file}")
 
 
 def _stop_workers(pool: ProcessPoolExecutor) -> None:

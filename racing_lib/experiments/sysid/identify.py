@@ -19,7 +19,13 @@ from racing_lib.errors import ModelError
 from racing_lib.experiments.sysid.lateral import _fit_lateral, _front_force_sin
 from racing_lib.experiments.sysid.longitudinal import _fit_brake_limit, _fit_coast_down, _fit_pedal
 from racing_lib.experiments.sysid.manoeuvres import MANOEUVRES, DriveLog, collect_logs
-from racing_lib.experiments.sysid.samples import _MIN_SAMPLES, Derivative, FitStats, _samples
+from racing_lib.experiments.sysid.samples import (
+    _MIN_SAMPLES,
+    Derivative,
+    FitStats,
+    _Samples,
+    _samples,
+)
 from racing_lib.io import atomic_write_json
 from racing_lib.model import GRIP_MARGIN, CarModel, ModelParams, X
 from racing_lib.model.identified import shipped_fit_path
@@ -187,8 +193,6 @@ class IdentificationResult:
         }
 
 
-# long function: the four identification steps of the module docstring, in order, each using the
-#   ones before
 def identify(
     logs: Sequence[DriveLog],
     known: ModelParams | None = None,
@@ -227,6 +231,28 @@ def identify(
     kp = ModelParams() if known is None else known
     if not isinstance(kp, ModelParams):
         raise ModelError(f"known must be a ModelParams; got {type(kp).__name__}.")
+    S = _checked_samples(logs, derivative)
+    fitted, tyres, fits, notes = _fit_all(kp, S, fit_steer_lag)
+    rows = _report_rows(fitted, tyres, fits, truth)
+    return IdentificationResult(
+        params=fitted,
+        steer_tau=tyres["steer_tau"],
+        fits=fits,
+        rows=rows,
+        notes=tuple(notes),
+        n_samples=int(S.vx.size),
+        elapsed=time.perf_counter() - t0,
+    )
+
+
+def _checked_samples(logs: Sequence[DriveLog], derivative: Derivative) -> _Samples:
+    """The fitting samples of ``logs`` (derivatives taken as ``derivative`` says), checked.
+
+    Raises
+    ------
+    ModelError
+        If an entry is not a :class:`DriveLog` or the logs are too short.
+    """
     logs = list(logs)
     bad = [type(x).__name__ for x in logs if not isinstance(x, DriveLog)]
     if bad:
@@ -238,6 +264,34 @@ def identify(
             f"logs of >= 8 periods, need >= {10 * _MIN_SAMPLES}. Record the manoeuvres "
             f"{sorted(MANOEUVRES)} (racing_lib.experiments.sysid.collect_logs())."
         )
+    return S
+
+
+def _fit_all(
+    kp: ModelParams, S: _Samples, fit_steer_lag: bool
+) -> tuple[ModelParams, dict[str, float], dict[str, Any], list[str]]:
+    """The four identification steps of the module docstring, in order, each using the ones before.
+
+    Parameters
+    ----------
+    kp : ModelParams
+        The values taken as known (mass in kg, geometry in m, mu, g in m/s^2).
+    S : _Samples
+        The fitting samples.
+    fit_steer_lag : bool
+        Identify a first-order steering lag (s) with the lateral parameters.
+
+    Returns
+    -------
+    fitted : ModelParams
+        The identified parameter set (tyres, resistances, pedal map).
+    tyres : dict
+        The lateral fit's values, ``steer_tau`` (s) included.
+    fits : dict
+        The quality of each fit, by name.
+    notes : list of str
+        What the coast-down and brake-limit fits report.
+    """
     tyres, fits = _fit_lateral(kp, S, fit_steer_lag)
     fyf_sin = _front_force_sin(kp, S, tyres)
     resist, f2 = _fit_coast_down(kp, S, fyf_sin)
@@ -250,31 +304,53 @@ def identify(
     notes.append(brake_note)
     pedal = dataclasses.replace(pedal, a_brk_max=a_brk_max)
     fitted = fitted.replace(pedal=pedal)
+    return fitted, tyres, fits, notes
 
+
+#: The report's rows: (parameter, unit, the manoeuvres it is fitted from).
+_REPORT_SPEC = (
+    ("C_xw", "kg/m", "coast-down"),
+    ("c_rr", "-", "coast-down"),
+    ("B_f", "1/rad", "circles+steps"),
+    ("C_f", "-", "circles+steps"),
+    ("D_f", "-", "circles+steps"),
+    ("B_r", "1/rad", "circles+steps"),
+    ("C_r", "-", "circles+steps"),
+    ("D_r", "-", "circles+steps"),
+    ("mu*D_f", "-", "circles+steps"),
+    ("mu*D_r", "-", "circles+steps"),
+    ("C_alpha_f", "N/rad", "circles+steps"),
+    ("C_alpha_r", "N/rad", "circles+steps"),
+    ("I_zz", "kg m^2", "steps"),
+    ("steer_tau", "s", "steps"),
+    ("pedal m_0", "m/s^2", "laps+steps"),
+    ("pedal m_vx", "1/s", "laps+steps"),
+    ("pedal m_thr", "m/s^2", "laps+steps"),
+    ("pedal m_brk", "m/s^2", "laps+steps"),
+    ("pedal p_thr", "W/kg", "laps+steps"),
+    ("pedal a_brk_max", "m/s^2", "braking"),
+)
+
+
+def _report_rows(
+    fitted: ModelParams, tyres: dict[str, float], fits: dict[str, Any], truth: Any
+) -> list[dict[str, Any]]:
+    """One row per identified parameter: fitted and true value, error (%), fit quality.
+
+    Parameters
+    ----------
+    fitted : ModelParams
+        The identified set.
+    tyres : dict
+        The lateral fit's values (``steer_tau`` in s).
+    fits : dict
+        The quality of each fit, by name.
+    truth : VehicleParams, ModelParams or None
+        The true car (None: no "true" column).
+    """
     tp, tau_true = _truth_params(truth)
     lat, yaw = fits["lateral balance (all data)"], fits["yaw balance (all data)"]
-    spec = [
-        ("C_xw", "kg/m", "coast-down"),
-        ("c_rr", "-", "coast-down"),
-        ("B_f", "1/rad", "circles+steps"),
-        ("C_f", "-", "circles+steps"),
-        ("D_f", "-", "circles+steps"),
-        ("B_r", "1/rad", "circles+steps"),
-        ("C_r", "-", "circles+steps"),
-        ("D_r", "-", "circles+steps"),
-        ("mu*D_f", "-", "circles+steps"),
-        ("mu*D_r", "-", "circles+steps"),
-        ("C_alpha_f", "N/rad", "circles+steps"),
-        ("C_alpha_r", "N/rad", "circles+steps"),
-        ("I_zz", "kg m^2", "steps"),
-        ("steer_tau", "s", "steps"),
-        ("pedal m_0", "m/s^2", "laps+steps"),
-        ("pedal m_vx", "1/s", "laps+steps"),
-        ("pedal m_thr", "m/s^2", "laps+steps"),
-        ("pedal m_brk", "m/s^2", "laps+steps"),
-        ("pedal p_thr", "W/kg", "laps+steps"),
-        ("pedal a_brk_max", "m/s^2", "braking"),
-    ]
+    pedal = fitted.pedal
     fd = _derived(fitted)
     td = _derived(tp) if tp is not None else {}
     pedal_vals = {
@@ -293,7 +369,7 @@ def identify(
         "braking": "median of the full stops",
     }
     rows = []
-    for name, unit, man in spec:
+    for name, unit, man in _REPORT_SPEC:
         if name in fd:
             val, true = fd[name], td.get(name)
         elif name == "steer_tau":
@@ -323,15 +399,7 @@ def identify(
                 "manoeuvre": man,
             }
         )
-    return IdentificationResult(
-        params=fitted,
-        steer_tau=tyres["steer_tau"],
-        fits=fits,
-        rows=rows,
-        notes=tuple(notes),
-        n_samples=int(S.vx.size),
-        elapsed=time.perf_counter() - t0,
-    )
+    return rows
 
 
 def run(seed: int = 0, fast: bool | None = None, out: str | None = None) -> IdentificationResult:

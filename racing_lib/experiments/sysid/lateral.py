@@ -71,12 +71,45 @@ def _fit_axle(alpha: np.ndarray, phi: np.ndarray, mu: float) -> tuple[np.ndarray
     return best.x, best
 
 
-# long function: the tyre, steering-lag and inertia fits share one selection of steady and transient
-#   samples
 def _fit_lateral(
     kp: ModelParams, S: _Samples, fit_lag: bool
 ) -> tuple[dict[str, float], dict[str, FitStats]]:
     """Steps 1 and 2: tyres from the steady state, then the steering lag and I_zz from all data."""
+    lat, ss = _lateral_samples(kp, S)
+    coeffs, F_zf, F_zr, stats = _fit_steady_tyres(kp, S, ss)
+    Bf, Cf, Df, Br, Cr, Dr = coeffs
+    tau, I_zz, transient = _fit_lag_and_inertia(kp, S, lat, coeffs, F_zf, F_zr, fit_lag)
+    stats |= transient
+    full = np.array([Bf, Cf, Df, Br, Cr, Dr, I_zz / 1000.0, tau])
+    p = full
+    names = ("B_f", "C_f", "D_f", "B_r", "C_r", "D_r")
+    out = {k: float(v) for k, v in zip(names, p[:6], strict=True)}
+    out["I_zz"] = float(p[6] * 1000.0)
+    out["steer_tau"] = float(p[7])
+    return out, stats
+
+
+def _lateral_samples(kp: ModelParams, S: _Samples) -> tuple[np.ndarray, np.ndarray]:
+    """The samples the lateral fits use: all cornering ones, and the steady-state ones.
+
+    Parameters
+    ----------
+    kp : ModelParams
+        Known values (``mu``; ``g`` in m/s^2).
+    S : _Samples
+        All samples.
+
+    Returns
+    -------
+    lat, ss : ndarray of bool
+        Designed manoeuvres with little longitudinal acceleration; of those, the steady-state
+        cornering samples (|a_y| > 0.3 m/s^2).
+
+    Raises
+    ------
+    ModelError
+        If the logs lack steering, or steady-state cornering up to 0.55 mu g.
+    """
     g, mu = kp.g, kp.mu
     # Little longitudinal force: the car's tyres share friction between x and y, the model's don't.
     # Designed manoeuvres only: laps add wall contacts and kerb-to-kerb slides the logs cannot flag.
@@ -108,8 +141,26 @@ def _fit_lateral(
             f"{0.55 * mu * g:.1f} m/s^2 (0.55 mu g)",
             "circles",
         )
+    return lat, ss
 
-    # Step 1: steady state (r_dot ~ 0): the yaw balance splits m a_y between the axles.
+
+def _fit_steady_tyres(
+    kp: ModelParams, S: _Samples, ss: np.ndarray
+) -> tuple[tuple[float, ...], np.ndarray, np.ndarray, dict[str, FitStats]]:
+    """Step 1: both axles' Pacejka factors from steady cornering (r_dot ~ 0).
+
+    The yaw balance splits m a_y between the axles.
+
+    Returns
+    -------
+    (B_f, C_f, D_f, B_r, C_r, D_r) : tuple of float
+        Stiffness (1/rad), shape and peak factors (dimensionless).
+    F_zf, F_zr : ndarray
+        The axle loads of every sample, N.
+    stats : dict
+        The fit's quality, as ``"tyres (steady state)"``.
+    """
+    mu = kp.mu
     F_zf, F_zr = _axle_loads(kp, S)
     L = kp.wheelbase
     a_f, a_r = _slip(kp, S, S.steer)
@@ -127,7 +178,46 @@ def _fit_lateral(
             max(_jac_condition(res_f.jac), _jac_condition(res_r.jac)),
         )
     }
+    return (Bf, Cf, Df, Br, Cr, Dr), F_zf, F_zr, stats
 
+
+def _fit_lag_and_inertia(
+    kp: ModelParams,
+    S: _Samples,
+    lat: np.ndarray,
+    coeffs: tuple[float, ...],
+    F_zf: np.ndarray,
+    F_zr: np.ndarray,
+    fit_lag: bool,
+) -> tuple[float, float, dict[str, FitStats]]:
+    """Step 2: the steering lag (s) and the yaw inertia I_zz (kg m^2) from all cornering samples.
+
+    Parameters
+    ----------
+    kp : ModelParams
+        Known values (mass in kg, geometry in m, ``mu``).
+    S : _Samples
+        All samples.
+    lat : ndarray of bool
+        The cornering samples (:func:`_lateral_samples`).
+    coeffs : tuple of float
+        The steady-state tyres (B_f, C_f, D_f, B_r, C_r, D_r).
+    F_zf, F_zr : ndarray
+        The axle loads of every sample, N.
+    fit_lag : bool
+        Fit the lag (otherwise 0 s).
+
+    Returns
+    -------
+    tau : float
+        Steering lag, s.
+    I_zz : float
+        Yaw inertia, kg m^2.
+    stats : dict
+        The lateral and yaw balances' fit quality.
+    """
+    mu = kp.mu
+    Bf, Cf, Df, Br, Cr, Dr = coeffs
     # Step 2a: the steering lag from the lateral balance m a_y = F_yf(delta) cos(delta) + F_yr, with
     # the steady-state tyres (a one-parameter nonlinear least-squares fit). The tyre curves stay
     # those of the steady state, which sees them cleanly.
@@ -158,13 +248,25 @@ def _fit_lateral(
         tau = float(res.x[0])
     else:
         tau = 0.0
+    fyf, fyr = front_rear(tau)
+    I_zz = _fit_inertia(kp, Ssub, fyr)
+    return tau, I_zz, _balance_stats(kp, Ssub, fyf, fyr, I_zz)
 
+
+def _fit_inertia(kp: ModelParams, Ssub: _Samples, fyr: np.ndarray) -> float:
+    """Step 2b: the yaw inertia I_zz (kg m^2) by linear least squares, given the rear forces (N).
+
+    Raises
+    ------
+    ModelError
+        If the fit gives a non-positive inertia.
+    """
     # Step 2b: I_zz by linear least squares from the yaw balance with the front force eliminated
     # through the measured lateral balance: I_zz r_dot = l_f m a_y - L F_yr. The front axle carries
     # the steering, so its force is where the actuator noise and lag enter; in this form that noise
     # appears identically on both sides (l_f dF_yf) instead of only in r_dot, which would bias I_zz
     # low (errors in the regressor). Only the rear tyre model enters.
-    fyf, fyr = front_rear(tau)
+    L = kp.wheelbase
     rd = Ssub.dr
     y_rear = kp.l_f * kp.m * Ssub.a_y - L * fyr
     A = rd[:, None]
@@ -175,9 +277,18 @@ def _fit_lateral(
             f"the yaw-balance fit gave a non-positive inertia ({I_zz:.3g} kg m^2)",
             "steps",
         )
-    n = idx.size
+    return I_zz
+
+
+def _balance_stats(
+    kp: ModelParams, Ssub: _Samples, fyf: np.ndarray, fyr: np.ndarray, I_zz: float
+) -> dict[str, FitStats]:
+    """How well the fitted front and rear forces (N) and I_zz (kg m^2) explain a_y and r_dot."""
+    rd = Ssub.dr
+    n = rd.size
     e_lat = (fyf + fyr) / kp.m - Ssub.a_y
     e_yaw = (kp.l_f * fyf - kp.l_r * fyr) / I_zz - rd  # the full model's yaw-acceleration error
+    stats = {}
     stats["lateral balance (all data)"] = FitStats(
         "lateral balance (all data)", n, _rms(e_lat), "m/s^2", _r2(Ssub.a_y, e_lat), 1.0
     )
@@ -189,13 +300,7 @@ def _fit_lateral(
         _r2(rd, e_yaw),
         1.0,  # one regressor (r_dot); its excitation was checked above
     )
-    full = np.array([Bf, Cf, Df, Br, Cr, Dr, I_zz / 1000.0, tau])
-    p = full
-    names = ("B_f", "C_f", "D_f", "B_r", "C_r", "D_r")
-    out = {k: float(v) for k, v in zip(names, p[:6], strict=True)}
-    out["I_zz"] = float(p[6] * 1000.0)
-    out["steer_tau"] = float(p[7])
-    return out, stats
+    return stats
 
 
 def _front_force_sin(kp: ModelParams, S: _Samples, tyres: dict[str, float]) -> np.ndarray:

@@ -16,7 +16,7 @@ from scipy.signal import savgol_filter
 
 from racing_lib.errors import ModelError
 from racing_lib.experiments.sysid.manoeuvres import MANOEUVRES, DriveLog
-from racing_lib.model.actuator import lagged_steering
+from racing_lib.model.actuator import NO_LAG_TAU, lagged_steering
 
 __all__ = ["FitStats"]
 
@@ -73,7 +73,7 @@ class _Samples:
         The angle obeys ``tau delta_dot = delta_cmd - delta`` with the command held over the period;
         each log starts settled (``delta = delta_cmd[0]``).
         """
-        if tau <= 1e-4:
+        if tau <= NO_LAG_TAU:
             return self.steer
         out = np.empty_like(self.steer)
         for start, stop in self.bounds:
