@@ -17,6 +17,7 @@ from racing_lib.experiments.lap import (
     LapSpec,
     drive_lap,
 )
+from racing_lib.model import identified_params
 from racing_lib.planning.trajectory import Trajectory
 from racing_lib.tracks import (
     builtin_track_names,
@@ -33,7 +34,7 @@ def main() -> None:
     print(f"{'track':<12} {'lap [s]':>8} {'wall median [s]':>16} {'min':>7} {'real-time x':>12}")
     for name in builtin_track_names():
         track = load_track(name)
-        reference = Trajectory.from_centerline(track).scale_speed(SPEED_SCALE)
+        reference = Trajectory.from_centerline(track, identified_params()).scale_speed(SPEED_SCALE)
         spec = LapSpec(track=track, trajectory=reference, controller="nominal")
         walls, lap = [], float("nan")
         for seed in range(repeats):

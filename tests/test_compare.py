@@ -102,9 +102,9 @@ def test_out_in_out_bump_is_read_as_entry_apex_exit(expressway):
 
 def test_bad_lines_are_refused(expressway, centerline_plan):
     with pytest.raises(PlanningError, match="at least 4"):
-        line_lap_time(expressway, ([0.0, 1.0, 2.0], [0.0, 1.0, 0.0]))
+        line_lap_time(expressway, ([0.0, 1.0, 2.0], [0.0, 1.0, 0.0]), POINT_MASS)
     with pytest.raises(PlanningError, match="cannot read a line"):
-        line_lap_time(expressway, object())
+        line_lap_time(expressway, object(), POINT_MASS)
     backwards = (centerline_plan.x[::-1], centerline_plan.y[::-1])
     with pytest.raises(PlanningError, match="against the direction"):
         time_along_centerline(expressway, SimpleNamespace(x=backwards[0], y=backwards[1]), 0.0)

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from racing_lib.errors import PlanningError
+from racing_lib.model import identified_params
 from racing_lib.planning.curvature import (
     CurvatureSettings,
     solve_curvature,
@@ -28,7 +29,7 @@ def oval():
 
 @pytest.fixture(scope="module")
 def result(oval):
-    return solve_curvature(oval, settings=SETTINGS)
+    return solve_curvature(oval, identified_params(), settings=SETTINGS)
 
 
 def test_qp_line_stays_inside_the_track(oval, result):
@@ -43,7 +44,7 @@ def test_qp_line_stays_inside_the_track(oval, result):
 
 
 def test_qp_line_is_straighter_and_faster_than_the_centerline(oval, result):
-    centre = Trajectory.from_centerline(oval, spacing=5.0)
+    centre = Trajectory.from_centerline(oval, identified_params(), spacing=5.0)
     line = result.trajectory
     # Integral of kappa^2 over the lap (trapezoid on the nodes).
     k2_line = np.sum(line.kappa**2 * np.diff(np.append(line.s, line.length)))
@@ -83,7 +84,7 @@ def test_infeasible_qp_names_the_solver_and_status(oval):
     # A steering limit far too small for the 50 m arcs: the linearized dynamics cannot turn.
     settings = CurvatureSettings(spacing=5.0, delta_max=0.005)
     with pytest.raises(PlanningError) as err:
-        solve_curvature(oval, settings=settings)
+        solve_curvature(oval, identified_params(), settings=settings)
     msg = str(err.value)
     assert "CLARABEL (via cvxpy)" in msg
     assert "infeasible" in msg

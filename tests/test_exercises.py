@@ -27,6 +27,7 @@ from racing_lib.grading import (
     ch06,
     grader,
 )
+from racing_lib.model import identified_params
 
 REPO = Path(__file__).resolve().parents[1]
 EXERCISES = REPO / "exercises"
@@ -469,7 +470,7 @@ def test_curvature_qp_by_the_library_is_refused():
     from racing_lib.planning import solve_curvature
 
     def library(oval, margin):
-        return solve_curvature(oval, None).e_y
+        return solve_curvature(oval, identified_params()).e_y
 
     _wrong(ch03.check_min_curvature_qp(library), "solve_curvature", "cvxpy")
 

@@ -19,6 +19,7 @@ from racing_lib.experiments.lap import (
     summarize,
 )
 from racing_lib.interfaces import Command, Observation
+from racing_lib.model import identified_params
 from racing_lib.tracks import circle_track
 
 
@@ -148,7 +149,9 @@ def test_nominal_controller_laps_each_builtin_track_cleanly(name):
     from racing_lib.tracks import load_track
 
     track = load_track(name)
-    reference = Trajectory.from_centerline(track).scale_speed(MODERATE_SPEED_SCALE)
+    reference = Trajectory.from_centerline(track, identified_params()).scale_speed(
+        MODERATE_SPEED_SCALE
+    )
     m = drive_lap(LapSpec(track=track, trajectory=reference, controller="nominal"), seed=3).metrics
     assert m.completed
     assert m.wall_contacts == 0 and m.offtrack_time_s == 0.0

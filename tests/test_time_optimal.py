@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from racing_lib.errors import PlanningError
-from racing_lib.model import ModelOptions, ModelParams, discretize
+from racing_lib.model import ModelOptions, ModelParams, discretize, identified_params
 from racing_lib.planning.curvature import CurvatureSettings, solve_curvature
 from racing_lib.planning.time_optimal import (
     TimeOptimalSettings,
@@ -202,7 +202,7 @@ def test_track_narrower_than_the_car_is_refused():
 def test_expressway_cold_start():
     from racing_lib.tracks import load_track
 
-    res = solve_time_optimal(load_track("expressway"), start="cold")
+    res = solve_time_optimal(load_track("expressway"), identified_params(), start="cold")
     assert res.success, res.status
     assert 85.0 < res.lap_time < 105.0
 

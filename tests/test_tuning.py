@@ -32,7 +32,7 @@ from racing_lib.experiments.tuning import (
     tune_weights,
     tuning_objective,
 )
-from racing_lib.model import CarModel
+from racing_lib.model import CarModel, identified_params
 from racing_lib.optim.cmaes import (
     HISTORY_FILE,
     STATE_FILE,
@@ -290,7 +290,7 @@ def test_mpc_weight_space_holds_the_six_weights_of_the_paper():
 @pytest.fixture(scope="module")
 def circle_spec() -> LapSpec:
     track = circle_track(radius=100.0, width=12.0)
-    reference = Trajectory.from_centerline(track).scale_speed(0.75)
+    reference = Trajectory.from_centerline(track, identified_params()).scale_speed(0.75)
     return LapSpec(track=track, trajectory=reference, controller="nominal", run_up=30.0)
 
 
@@ -310,7 +310,9 @@ def test_weights_scored_on_several_circuits_get_the_mean_objective(circle_spec):
 
     wider = circle_track(radius=150.0, width=12.0)
     other = dataclasses.replace(
-        circle_spec, track=wider, trajectory=Trajectory.from_centerline(wider).scale_speed(0.75)
+        circle_spec,
+        track=wider,
+        trajectory=Trajectory.from_centerline(wider, identified_params()).scale_speed(0.75),
     )
     one, two = evaluate_weights(circle_spec, {}, (0,)), evaluate_weights(other, {}, (0,))
     assert one != two

@@ -30,6 +30,7 @@ from racing_lib.grading.grader import (
     grade,
     refuse_library,
 )
+from racing_lib.model import identified_params
 
 __all__ = [
     "LateralMPCProblem",
@@ -52,7 +53,7 @@ def _mpc():
     from racing_lib.tracks import load_track
 
     track = load_track("expressway")
-    return CoupledMPC(Trajectory.from_centerline(track), track=track)
+    return CoupledMPC(Trajectory.from_centerline(track, identified_params()), track=track)
 
 
 def _library_heuristic(mpc, xi0: np.ndarray, xi_ref: np.ndarray) -> np.ndarray:

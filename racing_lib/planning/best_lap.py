@@ -49,7 +49,7 @@ from typing import Any
 import numpy as np
 
 from racing_lib.errors import PlanningError
-from racing_lib.model import frenet_kinematics
+from racing_lib.model import frenet_kinematics, identified_params
 from racing_lib.planning.grid import DEFAULT_CAR_WIDTH, TrackGrid
 from racing_lib.planning.time_optimal import (
     TimeOptimalResult,
@@ -476,7 +476,9 @@ def solve_best_lap(
         to_settings = TimeOptimalSettings(
             spacing=st.spacing, car_width=st.car_width, margin=st.margin
         )
-        start = solve_time_optimal(track, settings=to_settings)
+        # The NLP starts from the plan of the shipped identified model: a good guess of the
+        # line, which the car's own equations then refine.
+        start = solve_time_optimal(track, identified_params(), settings=to_settings)
     if isinstance(start, TimeOptimalResult):
         z0 = _guess_from_plan(grid, p, start)
     elif isinstance(start, str) and start == "cold":

@@ -24,7 +24,8 @@ from typing import Any
 import numpy as np
 
 from racing_lib.errors import PlanningError
-from racing_lib.planning.trajectory import Trajectory, default_model_inputs
+from racing_lib.model import ModelOptions, ModelParams
+from racing_lib.planning.trajectory import Trajectory, model_inputs
 
 
 def _line_xy(line: Any) -> tuple[np.ndarray, np.ndarray]:
@@ -51,8 +52,8 @@ def _line_xy(line: Any) -> tuple[np.ndarray, np.ndarray]:
 def speed_profile_trajectory(
     track: Any,
     line: Any,
-    params: Any = None,
-    options: Any = None,
+    params: ModelParams,
+    options: ModelOptions | None = None,
     *,
     spacing: float = 3.0,
     v_top: float | None = None,
@@ -70,9 +71,8 @@ def speed_profile_trajectory(
         The track the line lies on (for the grade and the plan's metadata).
     line : Trajectory, object with ``x``/``y``, or (x, y)
         The closed line, m (first point not repeated at the end).
-    params : ModelParams, optional
-        Parameters of the speed profile (friction, mass, drag, pedal map); default
-        ``ModelParams()``.
+    params : ModelParams
+        Parameters of the speed profile (friction, mass, drag, pedal map).
     options : ModelOptions, optional
         Model effects (the drag switch matters); default ``ModelOptions()``.
     spacing : float
@@ -93,7 +93,8 @@ def speed_profile_trajectory(
     >>> from racing_lib.tracks import load_track
     >>> track = load_track("expressway")
     >>> line = track.centerline.position(track.centerline.sample(ds=3.0))
-    >>> traj = speed_profile_trajectory(track, line)
+    >>> from racing_lib.model import identified_params
+    >>> traj = speed_profile_trajectory(track, line, identified_params())
     >>> 100.0 < traj.lap_time < 120.0
     True
     """
@@ -101,7 +102,7 @@ def speed_profile_trajectory(
 
     if not spacing > 0:
         raise PlanningError(f"spacing must be positive, got {spacing!r} m.")
-    params, pedal_map, options = default_model_inputs(params, None, options)
+    params, pedal_map, options = model_inputs(params, None, options, "speed_profile_trajectory")
     x, y = _line_xy(line)
     path = Path(x, y, check=False)
     n = max(16, int(round(path.length / spacing)))
@@ -117,8 +118,8 @@ def speed_profile_trajectory(
 def line_lap_time(
     track: Any,
     line: Any,
-    params: Any = None,
-    options: Any = None,
+    params: ModelParams,
+    options: ModelOptions | None = None,
     *,
     spacing: float = 3.0,
     v_top: float | None = None,

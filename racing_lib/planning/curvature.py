@@ -76,7 +76,7 @@ from racing_lib.errors import PlanningError
 from racing_lib.model.car_model import CarModel
 from racing_lib.planning.grid import DEFAULT_CAR_WIDTH, TrackGrid
 from racing_lib.planning.speed import segment_times, speed_profile
-from racing_lib.planning.trajectory import Trajectory, default_model_inputs
+from racing_lib.planning.trajectory import Trajectory, model_inputs
 
 if TYPE_CHECKING:
     from racing_lib.model.params import ModelParams
@@ -367,7 +367,7 @@ def _lateral_qp(
 
 def solve_curvature(
     track: Any,
-    params: ModelParams | None = None,
+    params: ModelParams,
     options: Any = None,
     settings: CurvatureSettings | None = None,
     *,
@@ -380,9 +380,9 @@ def solve_curvature(
     ----------
     track : Track
         The track (its centerline is the Frenet reference).
-    params : ModelParams, optional
-        Planning model parameters (default: the identified set,
-        :func:`racing_lib.model.identified.identified_params`).
+    params : ModelParams
+        Planning model parameters, as they are (no grip margin is applied here; see
+        :func:`racing_lib.planning.plan`).
     options : ModelOptions, optional
         Model effects (default ``ModelOptions()``): used in the linearized dynamics and the drag in
         the speed profile.
@@ -406,14 +406,15 @@ def solve_curvature(
     Examples
     --------
     >>> from racing_lib.tracks import load_track
-    >>> res = solve_curvature(load_track("expressway"))
+    >>> from racing_lib.model import identified_params
+    >>> res = solve_curvature(load_track("expressway"), identified_params())
     >>> res.success, round(res.trajectory.lap_time)
     (True, 106)
     """
     from racing_lib.model import jacobians, spatial_dynamics
 
     st = settings or CurvatureSettings()
-    params, pedal, options = default_model_inputs(params, None, options)
+    params, pedal, options = model_inputs(params, None, options, "solve_curvature")
     t_start = time.perf_counter()
     if grid is None:
         grid = TrackGrid.from_track(track, st.spacing, st.car_width, st.margin)

@@ -23,14 +23,15 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from racing_lib.errors import PlanningError
+from racing_lib.geometry import Track
+from racing_lib.model.params import ModelParams
+from racing_lib.planning.trajectory import Trajectory
+from racing_lib.vehicle import VehicleParams
 from racing_lib.vehicle.forces import NUMPY_OPS, slip_angles
-
-if TYPE_CHECKING:
-    from racing_lib.model.params import ModelParams
 
 __all__ = ["Demand", "format_demands", "plan_demands"]
 
@@ -78,7 +79,10 @@ def _largest(name: str, unit: str, values: np.ndarray, s: np.ndarray, limit: flo
 
 
 def plan_demands(
-    trajectory: Any, params: ModelParams | None = None, vehicle: Any = None, track: Any = None
+    trajectory: Trajectory,
+    params: ModelParams | None = None,
+    vehicle: VehicleParams | None = None,
+    track: Track | None = None,
 ) -> list[Demand]:
     """The largest demand of each kind along ``trajectory`` (see the module notes).
 
@@ -87,8 +91,8 @@ def plan_demands(
     trajectory : Trajectory
         The plan.
     params : ModelParams, optional
-        The planning model the demands are measured with, at its full (identified) friction
-        (default: ``racing_lib.model.identified.identified_params()``).
+        The planning model the demands are measured with, at its full friction (default: the
+        parameters of the model the plan carries, ``trajectory.model.params``).
     vehicle : VehicleParams, optional
         The car's actuator and engine (default: the simulated car's ``VehicleParams()``).
     track : Track, optional
@@ -99,12 +103,13 @@ def plan_demands(
     list of Demand
         In the order of the module notes.
     """
-    from racing_lib.vehicle import VehicleParams
-
     if params is None:
-        from racing_lib.model.identified import identified_params
-
-        params = identified_params()
+        if trajectory.model is None:
+            raise PlanningError(
+                "this plan carries no model to measure its demands with (an old plan file or "
+                "the best lap): pass params, e.g. racing_lib.model.identified_params()."
+            )
+        params = trajectory.model.params
     vehicle = vehicle if vehicle is not None else VehicleParams()
     s = np.asarray(trajectory.s, dtype=float)
     t = np.asarray(trajectory.t, dtype=float)

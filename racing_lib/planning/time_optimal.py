@@ -75,7 +75,7 @@ from racing_lib.planning.time_optimal_nlp import (
     interval_functions,
 )
 from racing_lib.planning.time_optimal_settings import TimeOptimalResult, TimeOptimalSettings
-from racing_lib.planning.trajectory import Trajectory, default_model_inputs
+from racing_lib.planning.trajectory import Trajectory, model_inputs
 
 __all__ = [
     "DEFAULT_START",
@@ -336,7 +336,7 @@ def ipopt_solver(
 
 def solve_time_optimal(
     track: Any,
-    params: ModelParams | None = None,
+    params: ModelParams,
     options: Any = None,
     settings: TimeOptimalSettings | None = None,
     *,
@@ -351,9 +351,9 @@ def solve_time_optimal(
     ----------
     track : Track
         The track; its centerline is the Frenet reference of the NLP.
-    params : ModelParams, optional
-        Planning model parameters (default: the identified set,
-        :func:`racing_lib.model.identified.identified_params`).
+    params : ModelParams
+        Planning model parameters, as they are (no grip margin is applied here; see
+        :func:`racing_lib.planning.plan`).
     options : ModelOptions, optional
         Model effects (default ``ModelOptions()``); any ablation plans through this same code.
     settings : TimeOptimalSettings, optional
@@ -383,12 +383,13 @@ def solve_time_optimal(
     Examples
     --------
     >>> from racing_lib.tracks import load_track
-    >>> res = solve_time_optimal(load_track("expressway"))
+    >>> from racing_lib.model import identified_params
+    >>> res = solve_time_optimal(load_track("expressway"), identified_params())
     >>> res.status, round(res.lap_time)
     ('Solve_Succeeded', 104)
     """
     st = settings or TimeOptimalSettings()
-    params, _, options = default_model_inputs(params, None, options)
+    params, _, options = model_inputs(params, None, options, "solve_time_optimal")
     v_top = float(st.v_top) if st.v_top is not None else 190.0 / 3.6
     grid = TrackGrid.from_track(track, st.spacing, st.car_width, st.margin)
     _check_friction(track, grid, params, options, st, v_top)

@@ -21,7 +21,7 @@ import math
 import os
 from dataclasses import dataclass, field
 from functools import cached_property
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -29,10 +29,8 @@ from numpy.typing import ArrayLike
 from racing_lib.errors import ModelError, PlanningError, RacingLibError
 from racing_lib.io import atomic_write_text
 from racing_lib.model.car_model import CarModel
+from racing_lib.model.params import ModelParams
 from racing_lib.planning.speed import segment_times, speed_profile
-
-if TYPE_CHECKING:
-    from racing_lib.model.params import ModelParams
 
 #: Version of the plan CSV format written by :meth:`Trajectory.save_csv`: 3 adds the model (a
 #: ``# model:`` line of JSON); version 2 files, without it, still load, with no model.
@@ -477,7 +475,7 @@ class Trajectory:
     def from_centerline(
         cls,
         track: Any,
-        params: ModelParams | None = None,
+        params: ModelParams,
         pedal_map: Any = None,
         options: Any = None,
         spacing: float = 3.0,
@@ -489,9 +487,9 @@ class Trajectory:
         ----------
         track : Track
             The track.
-        params : ModelParams, optional
-            Planning parameters (default: the identified set,
-            :func:`racing_lib.model.identified.identified_params`).
+        params : ModelParams
+            Planning model parameters, as they are (no grip margin is applied here; see
+            :func:`racing_lib.planning.plan`).
         pedal_map : PedalMap, optional
             a_x limits (default: ``params.pedal_map`` if present).
         options : ModelOptions, optional
@@ -501,7 +499,9 @@ class Trajectory:
         v_top : float, optional
             Top speed, m/s.
         """
-        params, pedal_map, options = default_model_inputs(params, pedal_map, options)
+        params, pedal_map, options = model_inputs(
+            params, pedal_map, options, "Trajectory.from_centerline"
+        )
         line = track.centerline
         n = max(8, int(round(line.length / spacing)))
         s = np.asarray(line.sample(n=n), float)
@@ -563,26 +563,36 @@ class Trajectory:
             dt=segment_times(np.diff(np.append(s, path.length)), v, np.roll(v, -1)),
             track=track,
             method=method,
-            model=CarModel(params, options),
+            # A line judged with ad-hoc parameters (a point mass, say) has no model to carry.
+            model=CarModel(params, options) if isinstance(params, ModelParams) else None,
             info={"speed_profile_success": prof.success},
         )
 
 
-def default_model_inputs(
-    params: ModelParams | None, pedal_map: Any, options: Any
+def model_inputs(
+    params: ModelParams | None, pedal_map: Any, options: Any, who: str
 ) -> tuple[ModelParams, Any, Any]:
-    """Fill in the defaults: the identified parameter set, its pedal map, ``ModelOptions()``.
+    """The planners' model inputs, checked: ``params`` is required, the rest defaults.
 
-    The planners use the model identified from driving data (chapter 02, shipped with the package)
-    unless told otherwise, as the paper planned with its identified model.
+    No planner picks a model of its own (the default is decided once, by
+    :func:`racing_lib.planning.plan` and the other entry points); ``options`` defaults to
+    ``ModelOptions()`` and ``pedal_map`` to ``params.pedal``.
+
+    Raises
+    ------
+    PlanningError
+        ``params`` is missing (``who`` names the planner in the message).
     """
-    from racing_lib import model
-    from racing_lib.model.identified import identified_params
+    from racing_lib.model import ModelOptions
 
     if params is None:
-        params = identified_params()
+        raise PlanningError(
+            f"{who} needs the model's parameters (a racing_lib.model.ModelParams): pass params, "
+            "for example racing_lib.model.identified_params(), or plan with "
+            "racing_lib.planning.plan(track), which uses the default model."
+        )
     if options is None:
-        options = model.ModelOptions()
+        options = ModelOptions()
     if pedal_map is None:
         pedal_map = params.pedal
     return params, pedal_map, options
