@@ -8,12 +8,14 @@
 * :mod:`racing_lib.model.numeric`: :class:`Model`, the same equations for NumPy users.
 * :mod:`racing_lib.model.identified`: the shipped identified parameters (chapter 02's fit).
 * :mod:`racing_lib.model.actuator`: the steering lag the model leaves out.
+* :mod:`racing_lib.model.drive`: :class:`Drive`, the record of a drive (a lap, a manoeuvre).
 * :mod:`racing_lib.model.analysis`: linear analysis and open-loop prediction errors.
 
 The names below are re-exported, so ``from racing_lib.model import ModelParams, X`` works.
 Taught in notebook 02.
 """
 
+from racing_lib.model.drive import Drive
 from racing_lib.model.equations import (
     VX_GUARD,
     discrete_dynamics,
@@ -32,6 +34,7 @@ from racing_lib.model.states import NU, NX, U, X
 
 __all__ = [
     "BRAKE_KNEE",
+    "Drive",
     "NU",
     "NX",
     "VX_GUARD",

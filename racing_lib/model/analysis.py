@@ -12,10 +12,11 @@ Taught in notebook 02 ("the race vehicle model"). Two questions about :mod:`raci
    cornering stiffnesses ``C_f``, ``C_r``) is what ``tests/test_analysis.py`` checks it against.
 
 2. **How far off is the model over a short horizon?** :func:`prediction_errors` replays a
-   recorded drive: from every recorded state it integrates the model open loop with the commands
-   that were actually sent, and compares the prediction after 0.5 s, 1 s, ... with what the car
-   did. Switching model effects off (:class:`~racing_lib.model.ModelOptions`) shows which of them
-   matter -- the paper's model ablation, measured on prediction instead of lap time.
+   recorded drive (:class:`~racing_lib.model.drive.Drive`): from every recorded state it
+   integrates the model open loop with the commands that were actually sent, and compares the
+   prediction after 0.5 s, 1 s, ... with what the car did. Switching model effects off
+   (:class:`~racing_lib.model.ModelOptions`) shows which of them matter -- the paper's model
+   ablation, measured on prediction instead of lap time.
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Protocol
+from typing import Any
 
 import control
 import numpy as np
@@ -31,13 +32,13 @@ import numpy as np
 from racing_lib.errors import ModelError
 from racing_lib.model import Model, ModelOptions, ModelParams, U, X
 from racing_lib.model.actuator import lagged_steering
+from racing_lib.model.drive import Drive
 
 __all__ = [
     "LateralAnalysis",
     "PredictionError",
     "ABLATION_VARIANTS",
     "ERROR_MEASURES",
-    "RecordedDrive",
     "format_prediction_table",
     "frenet_states",
     "lateral_analysis",
@@ -263,30 +264,12 @@ def lateral_analysis(
 # --------------------------------------------------------------------------------------------------
 
 
-class RecordedDrive(Protocol):
-    """What :func:`prediction_errors` needs of a log (a ``LapLog`` or a ``sysid.DriveLog``).
-
-    Node arrays (observations) have ``N`` or ``N + 1`` entries, command arrays ``N``; command
-    ``k`` was sent after observation ``k`` and held until observation ``k + 1``.
-    """
-
-    t: np.ndarray  # s
-    x: np.ndarray  # m
-    y: np.ndarray  # m
-    psi: np.ndarray  # rad
-    vx: np.ndarray  # m/s
-    vy: np.ndarray  # m/s
-    r: np.ndarray  # rad/s
-    steer: np.ndarray  # steering command, rad
-    pedal: np.ndarray  # pedal command, -
-
-
-def frenet_states(log: RecordedDrive, track: Any) -> np.ndarray:
+def frenet_states(log: Drive, track: Any) -> np.ndarray:
     """The model state ``xi`` of every observation of ``log`` on ``track``'s centerline.
 
     Parameters
     ----------
-    log : RecordedDrive
+    log : Drive
         A recorded drive.
     track : Track
         The track it was driven on; its centerline is the reference line of ``e_y``, ``e_psi``
@@ -472,7 +455,7 @@ def _horizon_steps(horizons: Sequence[float], dt: float) -> list[int]:
 
 
 def prediction_errors(
-    log: RecordedDrive,
+    log: Drive,
     track: Any,
     params: ModelParams | None = None,
     options: ModelOptions | None = None,
@@ -496,9 +479,9 @@ def prediction_errors(
 
     Parameters
     ----------
-    log : RecordedDrive
-        The drive (e.g. ``LapResult.log`` or a ``sysid.DriveLog``). It should contain no wall
-        contact: the model knows no walls.
+    log : Drive
+        The drive (e.g. ``LapResult.log`` or a manoeuvre of ``sysid.collect_logs``). It should
+        contain no wall contact: the model knows no walls.
     track : Track
         The track it was driven on.
     params : ModelParams, optional
@@ -536,11 +519,11 @@ def prediction_errors(
     t = np.asarray(log.t, dtype=float)
     steer_cmd = np.asarray(log.steer, dtype=float)
     pedal = np.asarray(log.pedal, dtype=float)
-    n_cmd = steer_cmd.size
-    if pedal.size != n_cmd or t.size not in (n_cmd, n_cmd + 1):
+    if not steer_cmd.size == pedal.size == t.size:
         raise ModelError(
-            f"the log has {t.size} observations, {n_cmd} steering and {pedal.size} pedal "
-            "commands; expected N or N + 1 observations and N of each command."
+            f"the log has {t.size} observations, {steer_cmd.size} steering and {pedal.size} "
+            "pedal commands; a Drive has one of each per sample (the command sent after the "
+            "observation)."
         )
     if dt is None:
         dt = float(np.median(np.diff(t))) if t.size > 1 else 0.1
@@ -550,7 +533,7 @@ def prediction_errors(
     delta = lagged_steering(steer_cmd, steer_tau, dt)
 
     # Start points whose whole window lies within the observations and above v_min.
-    last_start = min(n_cmd, t.size - 1) - h_max
+    last_start = t.size - 1 - h_max
     if last_start < 0:
         raise ModelError(
             f"the log ({t.size} observations) is shorter than the longest horizon "
@@ -605,7 +588,7 @@ ABLATION_VARIANTS: dict[str, ModelOptions] = {
 
 
 def prediction_table(
-    log: RecordedDrive,
+    log: Drive,
     track: Any,
     params: ModelParams | None = None,
     variants: Mapping[str, ModelOptions] | None = None,
