@@ -1,4 +1,4 @@
-"""Tests of racing_lib.model.analysis against independent truths.
+"""Tests of racing_lib.model.lateral and racing_lib.model.prediction against independent truths.
 
 * The lateral linearization against the classic linear bicycle model written out by hand from the
   axles' cornering stiffnesses (state matrix, input matrix, characteristic polynomial, steady-state
@@ -17,16 +17,14 @@ import pytest
 
 from racing_lib.errors import ModelError
 from racing_lib.model import VX_GUARD, Drive, Model, ModelOptions, ModelParams, X
-from racing_lib.model.analysis import (
+from racing_lib.model.equations import VX_GUARD_WIDTH
+from racing_lib.model.lateral import lateral_analysis, lateral_linearization, understeer_gradient
+from racing_lib.model.prediction import (
     format_prediction_table,
-    lateral_analysis,
-    lateral_linearization,
     predict_open_loop,
     prediction_errors,
     prediction_table,
-    understeer_gradient,
 )
-from racing_lib.model.equations import VX_GUARD_WIDTH
 from racing_lib.tracks import circle_track
 
 P = ModelParams()

@@ -9,7 +9,8 @@
 * :mod:`racing_lib.model.identified`: the shipped identified parameters (chapter 02's fit).
 * :mod:`racing_lib.model.actuator`: the steering lag the model leaves out.
 * :mod:`racing_lib.model.drive`: :class:`Drive`, the record of a drive (a lap, a manoeuvre).
-* :mod:`racing_lib.model.analysis`: linear analysis and open-loop prediction errors.
+* :mod:`racing_lib.model.lateral`: the linear analysis of the lateral dynamics.
+* :mod:`racing_lib.model.prediction`: the open-loop prediction error against a recorded drive.
 
 The names below are re-exported, so ``from racing_lib.model import ModelParams, X`` works.
 Taught in notebook 02.

@@ -3,7 +3,7 @@
 One record for every drive: a lap of :func:`racing_lib.experiments.lap.run_lap` (whose
 :class:`~racing_lib.experiments.lap.LapLog` adds the lap's own columns), a manoeuvre of the
 identification (:mod:`racing_lib.experiments.sysid`), and the input of the prediction error
-(:func:`racing_lib.model.analysis.prediction_errors`). Taught in notebooks 01 (the lap's log) and
+(:func:`racing_lib.model.prediction.prediction_errors`). Taught in notebooks 01 (the lap's log) and
 02 (identification and prediction).
 """
 
