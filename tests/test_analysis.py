@@ -1,4 +1,4 @@
-"""Tests of racing_lib.model.analysis against independent truths.
+"""Tests of racing_lib.model.lateral and racing_lib.model.prediction against independent truths.
 
 * The lateral linearization against the classic linear bicycle model written out by hand from the
   axles' cornering stiffnesses (state matrix, input matrix, characteristic polynomial, steady-state
@@ -16,17 +16,15 @@ import numpy as np
 import pytest
 
 from racing_lib.errors import ModelError
-from racing_lib.model import VX_GUARD, Model, ModelOptions, ModelParams, X
-from racing_lib.model.analysis import (
+from racing_lib.model import VX_GUARD, Drive, Model, ModelOptions, ModelParams, X
+from racing_lib.model.equations import VX_GUARD_WIDTH
+from racing_lib.model.lateral import lateral_analysis, lateral_linearization, understeer_gradient
+from racing_lib.model.prediction import (
     format_prediction_table,
-    lateral_analysis,
-    lateral_linearization,
     predict_open_loop,
     prediction_errors,
     prediction_table,
-    understeer_gradient,
 )
-from racing_lib.model.equations import VX_GUARD_WIDTH
 from racing_lib.tracks import circle_track
 
 P = ModelParams()
@@ -157,7 +155,8 @@ def model_drive():
     xi0 = np.array([[22.0, 0.0, 22.0 / 150.0, 0.0, 0.3, 5.0]])
     states = predict_open_loop(Model(P), xi0, steer[None, :], pedal[None, :], track)[:, 0, :]
     x, y, psi = track.centerline.to_cartesian(states[:, X.S], states[:, X.EY], states[:, X.EPSI])
-    log = SimpleNamespace(
+    # One sample per observation, each with the command sent after it (none after the last).
+    log = Drive(
         t=0.1 * np.arange(n + 1),
         x=x,
         y=y,
@@ -165,8 +164,8 @@ def model_drive():
         vx=states[:, X.VX],
         vy=states[:, X.VY],
         r=states[:, X.R],
-        steer=steer,
-        pedal=pedal,
+        steer=np.append(steer, steer[-1]),
+        pedal=np.append(pedal, pedal[-1]),
     )
     return log, track
 
@@ -220,6 +219,8 @@ def test_prediction_table_and_format(model_drive):
 
 def test_bad_horizons_and_short_logs_are_refused(model_drive):
     log, track = model_drive
+    with pytest.raises(ModelError, match="one of each per sample"):
+        prediction_errors(SimpleNamespace(**{**vars(log), "steer": log.steer[:-1]}), track, P)
     with pytest.raises(ModelError, match="multiple of the control period"):
         prediction_errors(log, track, P, horizons=(0.25,))
     with pytest.raises(ModelError, match="shorter than the longest horizon"):

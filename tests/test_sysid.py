@@ -18,14 +18,13 @@ import pytest
 from racing_lib.errors import ModelError
 from racing_lib.experiments.sysid import (
     TOLERANCES,
-    DriveLog,
     collect_logs,
     identify,
     lap_logs,
     pedal_map_r2,
 )
 from racing_lib.experiments.sysid.samples import _samples
-from racing_lib.model import ModelParams
+from racing_lib.model import Drive, ModelParams
 from racing_lib.model.identified import identified_params
 from racing_lib.vehicle import VehicleParams
 
@@ -33,7 +32,7 @@ SEED = 7  # fresh data: the shipped parameter file was fitted with seed 0
 
 
 @pytest.fixture(scope="module")
-def logs() -> list[DriveLog]:
+def logs() -> list[Drive]:
     # Fast mode's smaller data set (about 2 s to collect): the same manoeuvres, fewer levels.
     return collect_logs(seed=SEED, fast=True)
 
@@ -166,6 +165,17 @@ def test_logs_without_yaw_transients_name_the_steps(logs):
     assert "I_zz" in str(info.value)
 
 
+def test_a_manoeuvre_records_each_observation_with_the_command_sent_after_it(logs):
+    for log in logs:
+        sizes = {k: getattr(log, k).size for k in ("x", "vx", "r", "theta", "steer", "pedal")}
+        assert set(sizes.values()) == {log.t.size}, (log.name, sizes)
+
+
+def test_a_drive_without_road_pitch_is_refused(logs):
+    with pytest.raises(ModelError, match="road pitch"):
+        identify([dataclasses.replace(log, theta=None) for log in logs])
+
+
 def test_log_with_nan_is_refused(logs):
     log = logs[0]
     vx = log.vx.copy()
@@ -177,16 +187,19 @@ def test_log_with_nan_is_refused(logs):
 # ---------------------------------------------------------------- building blocks, analytic truths
 
 
-def _truncate(log: DriveLog, n: int) -> DriveLog:
-    nodes = {k: getattr(log, k)[: n + 1] for k in ("t", "x", "y", "psi", "vx", "vy", "r", "theta")}
-    return dataclasses.replace(log, steer=log.steer[:n], pedal=log.pedal[:n], **nodes)
+def _truncate(log: Drive, n: int) -> Drive:
+    """The first ``n`` periods of ``log``: ``n + 1`` samples."""
+    cols = ("t", "x", "y", "psi", "vx", "vy", "r", "theta", "steer", "pedal")
+    return dataclasses.replace(log, **{k: getattr(log, k)[: n + 1] for k in cols})
 
 
-def _synthetic(vx, steer, dt=0.1) -> DriveLog:
-    n = len(steer)
-    t = dt * np.arange(n + 1)
-    z = np.zeros(n + 1)
-    return DriveLog("synthetic", "steps", t, z, z, z, vx, z, z, z, steer, np.zeros(n))
+def _synthetic(vx, steer, dt=0.1) -> Drive:
+    """A drive of ``len(steer)`` periods: the commands of the periods, then one after the last."""
+    steer = np.append(steer, 0.0)
+    n = steer.size
+    t = dt * np.arange(n)
+    z = np.zeros(n)
+    return Drive(t, z, z, z, vx, z, z, steer, z, theta=z, name="synthetic", kind="steps")
 
 
 def test_interval_derivative_is_the_exact_mean_acceleration():

@@ -15,7 +15,6 @@ chapter after it.
 
 from __future__ import annotations
 
-import io
 import math
 import time
 from collections.abc import Callable, Iterable, Sequence
@@ -25,7 +24,7 @@ from typing import Any, Protocol, TypeVar
 
 import numpy as np
 
-from racing_lib.errors import PlantError
+from racing_lib.errors import ModelError, PlantError
 from racing_lib.geometry import (
     FrenetTracker,
     Path,
@@ -36,10 +35,13 @@ from racing_lib.interfaces import (
     Observation,
     Plant,
 )
-from racing_lib.io import atomic_write_bytes
 from racing_lib.model import CarModel
+from racing_lib.model.drive import DRIVE_COLUMNS, Drive
 from racing_lib.planning import Trajectory
 from racing_lib.vehicle import VehicleParams
+
+#: The lap's columns beyond those of every drive, one entry per control step.
+LAP_COLUMNS = ("s_ref", "ey", "vx_ref", "s_track", "solve_ms", "in_lap")
 
 
 class Reference(Protocol):
@@ -101,25 +103,17 @@ class LapMetrics:
         }
 
 
-@dataclass
-class LapLog:
-    """Everything recorded at each control step of a run (arrays of equal length).
+@dataclass(frozen=True)
+class LapLog(Drive):
+    """A lap's :class:`~racing_lib.model.drive.Drive`, with the lap's own columns.
 
-    Times in s, positions in m, angles in rad, speeds in m/s. ``s_ref`` and ``ey`` are the Frenet
-    coordinates on the reference path, ``s_track`` the arc length on the track centerline,
-    ``vx_ref`` the reference speed at ``s_ref``, ``solve_ms`` the controller's time for that step.
-    ``in_lap`` marks the steps between the two line crossings.
+    One row per control step: the observation, the command sent after it and, of the same length,
+    ``s_ref`` and ``ey``, the Frenet coordinates on the reference path (m), ``vx_ref`` the
+    reference speed at ``s_ref`` (m/s), ``s_track`` the arc length on the track centerline (m),
+    ``solve_ms`` the controller's time for that step (ms), and ``in_lap``, True for the steps
+    between the two line crossings. Times in s, positions in m, angles in rad, speeds in m/s.
     """
 
-    t: np.ndarray
-    x: np.ndarray
-    y: np.ndarray
-    psi: np.ndarray
-    vx: np.ndarray
-    vy: np.ndarray
-    r: np.ndarray
-    steer: np.ndarray
-    pedal: np.ndarray
     s_ref: np.ndarray
     ey: np.ndarray
     vx_ref: np.ndarray
@@ -127,11 +121,13 @@ class LapLog:
     solve_ms: np.ndarray
     in_lap: np.ndarray
 
-    def save(self, path: str) -> None:
-        """Write the log as a compressed ``.npz`` file, atomically."""
-        buf = io.BytesIO()
-        np.savez_compressed(buf, **asdict(self))
-        atomic_write_bytes(path, buf.getvalue())
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        n = self.t.size
+        for key in LAP_COLUMNS:
+            size = np.asarray(getattr(self, key)).size
+            if size != n:
+                raise ModelError(f"lap log: {key} has {size} samples, t has {n}.")
 
 
 @dataclass
@@ -301,23 +297,7 @@ def _plant_counters(plant: Plant) -> dict[str, float]:
 
 
 def _make_log(rows: Sequence[tuple[float, ...]]) -> LapLog:
-    names = (
-        "t",
-        "x",
-        "y",
-        "psi",
-        "vx",
-        "vy",
-        "r",
-        "steer",
-        "pedal",
-        "s_ref",
-        "ey",
-        "vx_ref",
-        "s_track",
-        "solve_ms",
-        "in_lap",
-    )
+    names = (*DRIVE_COLUMNS, *LAP_COLUMNS)
     data = np.asarray(rows, dtype=float).reshape(-1, len(names))
     cols = {name: data[:, i].copy() for i, name in enumerate(names)}
     cols["in_lap"] = cols["in_lap"].astype(bool)

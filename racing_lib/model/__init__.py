@@ -11,13 +11,16 @@
 * :mod:`racing_lib.model.identified`: the shipped identified parameters (chapter 02's fit) and the
   default model of every run, :func:`identified_model`.
 * :mod:`racing_lib.model.actuator`: the steering lag the model leaves out.
-* :mod:`racing_lib.model.analysis`: linear analysis and open-loop prediction errors.
+* :mod:`racing_lib.model.drive`: :class:`Drive`, the record of a drive (a lap, a manoeuvre).
+* :mod:`racing_lib.model.lateral`: the linear analysis of the lateral dynamics.
+* :mod:`racing_lib.model.prediction`: the open-loop prediction error against a recorded drive.
 
 The names below are re-exported, so ``from racing_lib.model import ModelParams, X`` works.
 Taught in notebook 02.
 """
 
 from racing_lib.model.car_model import CarModel
+from racing_lib.model.drive import Drive
 from racing_lib.model.equations import (
     VX_GUARD,
     discrete_dynamics,
@@ -43,6 +46,7 @@ __all__ = [
     "BRAKE_KNEE",
     "GRIP_MARGIN",
     "CarModel",
+    "Drive",
     "NU",
     "NX",
     "VX_GUARD",

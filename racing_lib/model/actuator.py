@@ -41,7 +41,7 @@ def lagged_steering(steer_cmd: np.ndarray, tau: float, dt: float = 0.1) -> np.nd
     The actual angle obeys ``tau delta_dot = delta_cmd - delta`` with each command held for one
     period ``dt``; the actuator starts settled at the first command (``delta = delta_cmd[0]``).
     Used by the identification (the steering lag fit) and by the open-loop predictions of
-    :mod:`racing_lib.model.analysis`. Taught in notebook 02.
+    :mod:`racing_lib.model.prediction`. Taught in notebook 02.
 
     Parameters
     ----------

@@ -96,7 +96,6 @@ from racing_lib.experiments.sysid.longitudinal import pedal_map_r2
 from racing_lib.experiments.sysid.manoeuvres import (
     MANOEUVRES,
     CarUnderTest,
-    DriveLog,
     braking_logs,
     circle_logs,
     coast_down_log,
@@ -111,7 +110,6 @@ __all__ = [
     "MANOEUVRES",
     "CarUnderTest",
     "TOLERANCES",
-    "DriveLog",
     "FitStats",
     "IdentificationResult",
     "braking_logs",

@@ -18,7 +18,7 @@ from racing_lib.config import fast_mode
 from racing_lib.errors import ModelError
 from racing_lib.experiments.sysid.lateral import _fit_lateral, _front_force_sin
 from racing_lib.experiments.sysid.longitudinal import _fit_brake_limit, _fit_coast_down, _fit_pedal
-from racing_lib.experiments.sysid.manoeuvres import MANOEUVRES, DriveLog, collect_logs
+from racing_lib.experiments.sysid.manoeuvres import MANOEUVRES, collect_logs
 from racing_lib.experiments.sysid.samples import (
     _MIN_SAMPLES,
     Derivative,
@@ -28,6 +28,7 @@ from racing_lib.experiments.sysid.samples import (
 )
 from racing_lib.io import atomic_write_json
 from racing_lib.model import GRIP_MARGIN, CarModel, ModelParams, X
+from racing_lib.model.drive import Drive
 from racing_lib.model.identified import shipped_fit_path
 from racing_lib.vehicle import (
     axle_cornering_stiffness,
@@ -194,7 +195,7 @@ class IdentificationResult:
 
 
 def identify(
-    logs: Sequence[DriveLog],
+    logs: Sequence[Drive],
     known: ModelParams | None = None,
     truth: Any = None,
     derivative: Derivative = "interval",
@@ -204,7 +205,7 @@ def identify(
 
     Parameters
     ----------
-    logs : sequence of DriveLog
+    logs : sequence of Drive
         Logs of the manoeuvres in :data:`MANOEUVRES` (see :func:`collect_logs`).
     known : ModelParams, optional
         Supplies the values taken as known: ``m, l_f, l_r, h_c, l_t, mu, g`` (default: the paper's
@@ -245,18 +246,20 @@ def identify(
     )
 
 
-def _checked_samples(logs: Sequence[DriveLog], derivative: Derivative) -> _Samples:
+def _checked_samples(logs: Sequence[Drive], derivative: Derivative) -> _Samples:
     """The fitting samples of ``logs`` (derivatives taken as ``derivative`` says), checked.
 
     Raises
     ------
     ModelError
-        If an entry is not a :class:`DriveLog` or the logs are too short.
+        If an entry is not a :class:`~racing_lib.model.Drive` or the logs are too short.
     """
     logs = list(logs)
-    bad = [type(x).__name__ for x in logs if not isinstance(x, DriveLog)]
+    bad = [type(x).__name__ for x in logs if not isinstance(x, Drive)]
     if bad:
-        raise ModelError(f"identify() takes DriveLog objects; got {sorted(set(bad))}.")
+        raise ModelError(
+            f"identify() takes racing_lib.model.Drive objects; got {sorted(set(bad))}."
+        )
     S = _samples(logs, derivative)
     if S.vx.size < 10 * _MIN_SAMPLES:
         raise ModelError(

@@ -11,7 +11,6 @@ from collections.abc import Sequence
 import numpy as np
 
 from racing_lib.experiments.sysid.lateral import _front_force_sin
-from racing_lib.experiments.sysid.manoeuvres import DriveLog
 from racing_lib.experiments.sysid.samples import (
     _MIN_SAMPLES,
     _V_MIN,
@@ -26,6 +25,7 @@ from racing_lib.experiments.sysid.samples import (
     _subset,
 )
 from racing_lib.model import ModelParams, PedalMap, X
+from racing_lib.model.drive import Drive
 from racing_lib.vehicle import (
     drag_force,
     rolling_resistance,
@@ -209,7 +209,7 @@ def _fit_brake_limit(kp: ModelParams, S: _Samples, fyf_sin: np.ndarray) -> tuple
     )
 
 
-def pedal_map_r2(params: ModelParams, logs: Sequence[DriveLog], steer_tau: float = 0.0) -> float:
+def pedal_map_r2(params: ModelParams, logs: Sequence[Drive], steer_tau: float = 0.0) -> float:
     """R^2 of ``params.pedal`` predicting the measured tyre acceleration a_x of ``logs``.
 
     Uses the same measured a_x as the fit (Eq. 5 solved for a_x with ``params``' drag, rolling

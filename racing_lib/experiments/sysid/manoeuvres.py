@@ -12,12 +12,12 @@ import numpy as np
 from racing_lib.config import fast_mode
 from racing_lib.errors import ModelError
 from racing_lib.interfaces import Plant
+from racing_lib.model.drive import Drive
 from racing_lib.vehicle import VehicleParams
 
 __all__ = [
     "MANOEUVRES",
     "CarUnderTest",
-    "DriveLog",
     "braking_logs",
     "coast_down_log",
     "circle_logs",
@@ -37,79 +37,6 @@ MANOEUVRES: dict[str, str] = {
 }
 
 
-# --------------------------------------------------------------------------------------------------
-# Logs
-# --------------------------------------------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class DriveLog:
-    """One recorded run: observations at the control rate and the commands sent.
-
-    Node arrays have ``N + 1`` entries (observations ``k = 0..N``); command arrays have ``N``
-    (command ``k`` was sent after observation ``k`` and held until observation ``k + 1``).
-
-    Attributes
-    ----------
-    name : str
-        Human-readable label, e.g. ``"circle R=60 m"``.
-    kind : str
-        Which manoeuvre it is, a key of :data:`MANOEUVRES`.
-    t : ndarray (N+1,)
-        Time, s.
-    x, y : ndarray (N+1,)
-        Position, m.
-    psi : ndarray (N+1,)
-        Yaw angle, rad.
-    vx, vy : ndarray (N+1,)
-        Body-frame longitudinal and lateral velocity, m/s.
-    r : ndarray (N+1,)
-        Yaw rate, rad/s.
-    theta : ndarray (N+1,)
-        Road pitch at the car's position from the track map, rad (positive uphill).
-    steer : ndarray (N,)
-        Steering command, rad.
-    pedal : ndarray (N,)
-        Pedal command in [-1, 1].
-    """
-
-    name: str
-    kind: str
-    t: np.ndarray
-    x: np.ndarray
-    y: np.ndarray
-    psi: np.ndarray
-    vx: np.ndarray
-    vy: np.ndarray
-    r: np.ndarray
-    theta: np.ndarray
-    steer: np.ndarray
-    pedal: np.ndarray
-
-    def __post_init__(self) -> None:
-        nodes = ("t", "x", "y", "psi", "vx", "vy", "r", "theta")
-        n = np.asarray(self.t).size
-        for key in (*nodes, "steer", "pedal"):
-            arr = np.asarray(getattr(self, key), dtype=float).ravel()
-            want = n if key in nodes else n - 1
-            if arr.size != want:
-                raise ModelError(
-                    f"DriveLog {self.name!r}: {key} has {arr.size} samples, expected {want} "
-                    "(N + 1 observations, N commands)."
-                )
-            if not np.all(np.isfinite(arr)):
-                raise ModelError(
-                    f"DriveLog {self.name!r}: {key} contains NaN or infinite values; drop the "
-                    "broken part of the log."
-                )
-            object.__setattr__(self, key, arr)
-
-    @property
-    def duration(self) -> float:
-        """Length of the log, s."""
-        return float(self.t[-1] - self.t[0]) if self.t.size else 0.0
-
-
 def _record(
     plant: Any,
     obs: Any,
@@ -119,8 +46,14 @@ def _record(
     kind: str,
     grade: Callable[[float, float], float] | None = None,
     stop: Callable[[Any], bool] | None = None,
-) -> DriveLog:
-    """Drive ``plant`` from observation ``obs`` with ``policy(obs, k) -> (steer, pedal)``."""
+) -> Drive:
+    """Drive ``plant`` from observation ``obs`` with ``policy(obs, k) -> (steer, pedal)``.
+
+    The drive ends after ``n_steps`` periods (or when ``stop`` says so): ``n_steps + 1``
+    observations at most, each followed by the command the policy sent after it (the last one's
+    is sent too, but its outcome is not recorded), as in a lap's
+    :class:`~racing_lib.model.drive.Drive`.
+    """
     rows = [obs]
     cmds: list[tuple[float, float]] = []
     for k in range(n_steps):
@@ -131,12 +64,16 @@ def _record(
         rows.append(obs)
         if stop is not None and stop(obs):
             break
+    steer, pedal = policy(obs, len(cmds))
+    steer, pedal = float(steer), float(min(max(pedal, -1.0), 1.0))
+    plant.step(steer, pedal)
+    cmds.append((steer, pedal))
     arr = {key: np.array([getattr(o, key) for o in rows]) for key in ("t", "x", "y", "psi")}
     for key in ("vx", "vy", "r"):
         arr[key] = np.array([getattr(o, key) for o in rows])
     theta = np.array([grade(o.x, o.y) for o in rows]) if grade is not None else np.zeros(len(rows))
     c = np.array(cmds, dtype=float).reshape(-1, 2)
-    return DriveLog(name, kind, theta=theta, steer=c[:, 0], pedal=c[:, 1], **arr)
+    return Drive(steer=c[:, 0], pedal=c[:, 1], theta=theta, name=name, kind=kind, **arr)
 
 
 # --------------------------------------------------------------------------------------------------
@@ -254,7 +191,7 @@ def coast_down_log(
     seed: int = 0,
     v_high: float = 42.0,
     v_low: float = 8.0,
-) -> DriveLog:
+) -> Drive:
     """Coast-down: full throttle to ``v_high`` (m/s), then pedal 0 until ``v_low`` (m/s).
 
     Driven on a 1.5 km radius circle (lateral acceleration below 1.2 m/s^2 at 42 m/s, so the
@@ -293,7 +230,7 @@ def braking_logs(
     car: CarUnderTest | VehicleParams | None = None,
     speeds: Sequence[float] = (45.0, 35.0, 25.0),
     v_low: float = 8.0,
-) -> list[DriveLog]:
+) -> list[Drive]:
     """Straight-line stops: full throttle to each of ``speeds`` (m/s), then full brake to ``v_low``.
 
     On the coast-down's 1.5 km circle, without actuation noise (a full stop is full brake). They
@@ -333,7 +270,7 @@ def circle_logs(
     radii: Sequence[float] = (40.0, 80.0, 150.0),
     levels: int = 8,
     hold: float = 5.0,
-) -> list[DriveLog]:
+) -> list[Drive]:
     """Steady-state cornering: constant-radius circles (ISO 4138) at rising speed.
 
     For each radius R (m) the car follows the circle with pure pursuit at ``levels`` speeds from
@@ -369,7 +306,7 @@ def step_logs(
     seed: int = 0,
     speeds: Sequence[float] = (15.0, 25.0, 35.0),
     duration: float = 40.0,
-) -> list[DriveLog]:
+) -> list[Drive]:
     """Steering steps and pedal steps around a 300 m radius circle, 60 m wide.
 
     At each base speed (m/s) the log alternates 10 s phases. *Steering phases*: a PI loop holds
@@ -400,8 +337,9 @@ def step_logs(
         n = int(round(duration / plant.dt))
         # A swing of 2 amp stays inside the actuator's linear band (steer_rate_max * steer_tau).
         amp = min(0.35 * mu * g * L / v0**2, 0.04)
-        steer_off = np.zeros(n)
-        pedal_lvl = np.zeros(n)
+        # n + 1 entries: the drive's last observation is followed by a command too.
+        steer_off = np.zeros(n + 1)
+        pedal_lvl = np.zeros(n + 1)
         k = 0
         while k < n:
             hold = int(rng.integers(5, 16))
@@ -442,7 +380,7 @@ def lap_logs(
     tracks: Sequence[str] = ("expressway", "shortcut"),
     scalings: Sequence[float] = (0.6, 0.8),
     max_time: float = 200.0,
-) -> list[DriveLog]:
+) -> list[Drive]:
     """Nominal-controller laps of the built-in tracks at fractions of the track's speed profile.
 
     As in the paper, a simple nominal controller (pure pursuit + speed PI) drives the car along
@@ -492,7 +430,7 @@ def collect_logs(
     params: VehicleParams | None = None,
     fast: bool | None = None,
     car: CarUnderTest | None = None,
-) -> list[DriveLog]:
+) -> list[Drive]:
     """Drive every manoeuvre of :data:`MANOEUVRES` with a car and return the logs.
 
     Parameters
@@ -509,11 +447,11 @@ def collect_logs(
 
     Returns
     -------
-    list of DriveLog
+    list of Drive
     """
     fast = fast_mode() if fast is None else fast
     test_car = car if car is not None else simulated_car(params)
-    logs: list[DriveLog] = []
+    logs: list[Drive] = []
     if fast:
         logs.append(coast_down_log(test_car, seed, v_high=38.0, v_low=12.0))
         logs += circle_logs(test_car, seed, radii=(50.0, 120.0), levels=6, hold=4.0)

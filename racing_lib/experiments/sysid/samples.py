@@ -15,8 +15,9 @@ import numpy as np
 from scipy.signal import savgol_filter
 
 from racing_lib.errors import ModelError
-from racing_lib.experiments.sysid.manoeuvres import MANOEUVRES, DriveLog
+from racing_lib.experiments.sysid.manoeuvres import MANOEUVRES
 from racing_lib.model.actuator import NO_LAG_TAU, lagged_steering
+from racing_lib.model.drive import Drive
 
 __all__ = ["FitStats"]
 
@@ -81,19 +82,24 @@ class _Samples:
         return out
 
 
-def _samples(logs: Sequence[DriveLog], derivative: Derivative) -> _Samples:
+def _samples(logs: Sequence[Drive], derivative: Derivative) -> _Samples:
     if derivative not in ("interval", "savgol"):
         raise ModelError(f"unknown derivative method {derivative!r}; use 'interval' or 'savgol'.")
     cols: dict[str, list[np.ndarray]] = {k: [] for k in _Samples.__dataclass_fields__}
     bounds = []
     start = 0
     for i, log in enumerate(logs):
-        n = log.steer.size
+        n = log.t.size - 1  # periods between observations, each with the command sent at its start
         if n < 8:
             continue  # too short to differentiate; the total length is checked by the caller
+        if log.theta is None:
+            raise ModelError(
+                f"drive {log.name!r} has no road pitch theta (rad); record it from the track map "
+                "at each observation to identify from it."
+            )
         dt = np.diff(log.t)
         if np.any(dt <= 0.0):
-            raise ModelError(f"DriveLog {log.name!r}: time must increase strictly.")
+            raise ModelError(f"drive {log.name!r}: time must increase strictly.")
         nodes = {"vx": log.vx, "vy": log.vy, "r": log.r, "theta": log.theta}
         for key in ("vx", "vy", "r"):
             v = nodes[key]
@@ -110,10 +116,10 @@ def _samples(logs: Sequence[DriveLog], derivative: Derivative) -> _Samples:
             cols[key].append(m)
             cols["d" + key].append(d)
         cols["theta"].append(0.5 * (log.theta[:-1] + log.theta[1:]))
-        cols["steer"].append(log.steer)
-        cols["pedal"].append(log.pedal)
+        cols["steer"].append(log.steer[:-1])
+        cols["pedal"].append(log.pedal[:-1])
         # Steady steering: the command moved less than 5 mrad over the last 10 periods.
-        s = log.steer
+        s = log.steer[:-1]
         settled = np.zeros(n, dtype=bool)
         for k in range(10, n):
             settled[k] = np.ptp(s[k - 10 : k + 1]) < 5e-3
