@@ -88,8 +88,10 @@ def identified_model() -> CarModel:
     model too), its effects drag and longitudinal load transfer (the paper's main experiment)
     and its grip margin :data:`GRIP_MARGIN`.
 
-    The steering actuator is the one the MPC has always assumed, the simulated car's (lag
-    0.08 s); the fit's own lag (:func:`identified_steer_tau`, 0.083 s) differs from it by
-    less than the fit's spread.
+    The steering actuator is the one the MPC has assumed since chapter 05, the simulated car's
+    data sheet (lag 0.08 s, 0.5 rad, 1.2 rad/s), not the fit's own lag
+    (:func:`identified_steer_tau`, a few per cent longer): every shipped result was made with
+    it. A model of a car identified from its logs takes its identified lag
+    (:meth:`racing_lib.experiments.sysid.IdentificationResult.car_model`).
     """
     return CarModel(identified_params(), grip_margin=GRIP_MARGIN)
