@@ -15,9 +15,19 @@ import math
 import os
 import tempfile
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, TypeAlias
 
 import numpy as np
+
+if TYPE_CHECKING:
+    # matplotlib costs a second to import; only atomic_savefig's callers need it
+    from matplotlib.figure import Figure
+
+JSONValue: TypeAlias = "dict[str, JSONValue] | list[JSONValue] | str | int | float | bool | None"
+"""A value JSON can hold: an object (str keys), an array, a string, a number, a boolean or null."""
+
+JSONObject: TypeAlias = "dict[str, JSONValue]"
+"""A JSON object, as ``json.load`` returns it and a ``to_dict`` method builds it."""
 
 #: The package's shipped data: the identified parameters, the tuned weights, the ablation table.
 DATA_DIR = Path(__file__).resolve().parent / "data"
@@ -53,12 +63,12 @@ def atomic_write_text(path: str | os.PathLike[str], text: str) -> None:
     atomic_write_bytes(path, text.encode("utf-8"))
 
 
-def atomic_write_json(path: str | os.PathLike[str], obj: Any) -> None:
+def atomic_write_json(path: str | os.PathLike[str], obj: JSONValue) -> None:
     """Write ``obj`` as indented JSON to ``path`` atomically."""
     atomic_write_text(path, json.dumps(obj, indent=2, sort_keys=True) + "\n")
 
 
-def atomic_savefig(fig: Any, path: str | os.PathLike[str], **kwargs: Any) -> None:
+def atomic_savefig(fig: Figure, path: str | os.PathLike[str], **kwargs: object) -> None:
     """Save a matplotlib figure atomically: rendered in memory, then written as one file.
 
     The format is the file's suffix (``.png``, ``.pdf``, ``.svg``); ``kwargs`` go to
@@ -70,11 +80,12 @@ def atomic_savefig(fig: Any, path: str | os.PathLike[str], **kwargs: Any) -> Non
     atomic_write_bytes(path, buf.getvalue())
 
 
-def jsonable(obj: Any) -> Any:
+# Any: JSON-ready for dicts, sequences, arrays and numbers; any other object passes through as is
+def jsonable(obj: object) -> Any:
     """A JSON-ready copy of ``obj``.
 
     NumPy arrays and scalars become Python values, tuples lists, dict keys strings, and NaN or
-    infinite floats None (JSON has no such numbers).
+    infinite floats None (JSON has no such numbers). Other objects are returned unchanged.
     """
     if isinstance(obj, dict):
         return {str(k): jsonable(v) for k, v in obj.items()}

@@ -28,9 +28,13 @@ import sys
 import tempfile
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    # casadi is imported where a build is made (_compile): importing this module stays cheap
+    import casadi as ca
 
 log = logging.getLogger(__name__)
 
@@ -45,7 +49,7 @@ MAX_BUILDS = 16
 CFLAGS = ("-O1", "-ffp-contract=off", "-fPIC", "-shared")
 
 
-def compile_function(fn: Any) -> Any | None:
+def compile_function(fn: ca.Function) -> ca.Function | None:
     """``fn`` compiled to machine code and loaded back, or None when no C compiler works.
 
     Parameters
@@ -62,7 +66,9 @@ def compile_function(fn: Any) -> Any | None:
     return None if compiled is None else compiled[0]
 
 
-def compile_functions(fns: Sequence[Any], name: str | None = None) -> list[Any] | None:
+def compile_functions(
+    fns: Sequence[ca.Function], name: str | None = None
+) -> list[ca.Function] | None:
     """Several functions compiled into one shared library (one compiler run), or None.
 
     Parameters
@@ -87,8 +93,8 @@ def compile_functions(fns: Sequence[Any], name: str | None = None) -> list[Any] 
 
 
 def compiled_or_interpreted(
-    fns: Sequence[Any], what: str, switch: str, name: str | None = None
-) -> list[Any]:
+    fns: Sequence[ca.Function], what: str, switch: str, name: str | None = None
+) -> list[ca.Function]:
     """``fns`` compiled together, or ``fns`` themselves with one warning when that fails.
 
     Parameters
@@ -144,7 +150,7 @@ def c_compiler() -> tuple[str | None, str]:
     return compiler, ""
 
 
-def _compile(fns: Sequence[Any], name: str) -> tuple[list[Any] | None, str]:
+def _compile(fns: Sequence[ca.Function], name: str) -> tuple[list[ca.Function] | None, str]:
     """The compiled functions and ``""``, or None and the reason they could not be had."""
     import casadi as ca
 
@@ -275,7 +281,7 @@ class BufferedFunction:
     its conversions (``benchmarks/bench_sim.py``, ``benchmarks/bench_mpc.py``).
     """
 
-    def __init__(self, fn: Any) -> None:
+    def __init__(self, fn: ca.Function) -> None:
         for kind, count, sparsity in (
             ("input", fn.n_in(), fn.sparsity_in),
             ("output", fn.n_out(), fn.sparsity_out),

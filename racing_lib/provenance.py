@@ -15,10 +15,9 @@ import os
 import platform
 import sys
 import time
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from importlib import metadata
 from pathlib import Path
-from typing import Any
 
 #: The distributions whose versions can move a number of this package.
 KEY_PACKAGES = (
@@ -79,7 +78,7 @@ def blas_kernel() -> str:
     return f"{mine[0]['library']} {mine[0]['kernel']}" if mine else "unknown"
 
 
-def environment() -> dict[str, Any]:
+def environment() -> dict[str, str | int | list[str] | dict[str, str] | None]:
     """A JSON-ready description of this machine and installation, with the time (UTC).
 
     Keys: ``created_utc``, ``python``, ``platform``, ``cpu``, ``cpu_count``, ``blas`` (NumPy's),
@@ -99,8 +98,11 @@ def environment() -> dict[str, Any]:
     }
 
 
-def describe(env: dict[str, Any]) -> str:
-    """One line for a person: date, CPU, BLAS kernel and the solver versions."""
+def describe(env: Mapping[str, object]) -> str:
+    """One line for a person: date, CPU, BLAS kernel and the solver versions.
+
+    ``env`` is an :func:`environment`, or one read back from a JSON file.
+    """
     pk = env.get("packages", {})
     versions = ", ".join(f"{n} {pk[n]}" for n in ("numpy", "casadi", "osqp", "cvxpy") if n in pk)
     return (

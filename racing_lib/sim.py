@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import functools
 import math
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -50,13 +50,17 @@ from racing_lib.vehicle.forces import (
 )
 from racing_lib.vehicle.params import VehicleParams
 
+if TYPE_CHECKING:
+    # casadi is only imported where a Function is built (racing_lib.vehicle.dynamics)
+    import casadi as ca
+
 __all__ = ["SimulatedCar"]
 
 _TWO_PI = 2.0 * math.pi
 
 
 @functools.lru_cache(maxsize=16)
-def _substep_function(params: VehicleParams, jit: bool) -> Any:
+def _substep_function(params: VehicleParams, jit: bool) -> ca.Function:
     """The car's RK4 substep (`rk4_substep_function`), compiled when ``jit`` and a C compiler work.
 
     Compiled code computes the interpreter's values to the last bit (`racing_lib.jit`; only a
@@ -449,7 +453,7 @@ class SimulatedCar:
         )
 
     # ------------------------------------------------------------------ extras for logs
-    def state_info(self) -> dict[str, Any]:
+    def state_info(self) -> dict[str, int | float | bool | tuple[float, ...]]:
         """Internal quantities for logs (chapter 02); not part of the `Plant` protocol.
 
         Returns

@@ -17,11 +17,11 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from typing import Any
 
 from racing_lib.errors import ModelError
+from racing_lib.io import JSONObject
 from racing_lib.model.params import ModelOptions, ModelParams
 from racing_lib.vehicle import VehicleParams
 
@@ -98,7 +98,7 @@ class CarModel:
         if self.edge_margin is not None:
             self._check_number("edge_margin", "m", lambda v: math.isfinite(v) and v >= 0, ">= 0")
 
-    def _check_number(self, name: str, unit: str, ok: Any, rule: str) -> None:
+    def _check_number(self, name: str, unit: str, ok: Callable[[float], bool], rule: str) -> None:
         """Store field ``name`` as a float, refusing a value that breaks ``rule``."""
         value = getattr(self, name)
         if isinstance(value, bool) or not isinstance(value, int | float):
@@ -115,7 +115,7 @@ class CarModel:
             return self.params
         return self.params.replace(mu=self.params.mu * (1.0 - self.grip_margin))
 
-    def replace(self, **changes: Any) -> CarModel:
+    def replace(self, **changes: ModelParams | ModelOptions | float | None) -> CarModel:
         """A copy with some fields changed (validated)."""
         return dataclasses.replace(self, **changes)
 
@@ -128,7 +128,7 @@ class CarModel:
         )
 
     # --- files ------------------------------------------------------------------------------------
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> JSONObject:
         """JSON-ready dictionary (floats kept exactly: JSON writes their shortest repr)."""
         return {
             "params": self.params.to_dict(),
@@ -141,7 +141,7 @@ class CarModel:
         }
 
     @classmethod
-    def from_dict(cls, data: Mapping[str, Any]) -> CarModel:
+    def from_dict(cls, data: Mapping[str, object]) -> CarModel:
         """Inverse of :meth:`to_dict`; unknown or missing fields raise :class:`ModelError`."""
         if not isinstance(data, Mapping):
             raise ModelError(f"CarModel data must be a JSON object, got {type(data).__name__}.")

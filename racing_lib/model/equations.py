@@ -77,6 +77,7 @@ from __future__ import annotations
 
 import functools
 import inspect
+from types import ModuleType
 from typing import Any
 
 import casadi as ca
@@ -87,6 +88,8 @@ from racing_lib.model.states import NU, NX, Domain, Method, U, X, as_float
 
 # The force laws are defined once, in racing_lib/vehicle/forces.py, for floats, numpy and CasADi
 from racing_lib.vehicle import (
+    MathOps,
+    Numeric,
     drag_force,
     lateral_load_transfer,
     longitudinal_load_transfer,
@@ -116,14 +119,20 @@ VX_GUARD: float = 1.0
 VX_GUARD_WIDTH: float = 0.1
 
 
-def _smooth_max(x: Any, lower: float, width: float) -> Any:
+def _smooth_max(x: Numeric, lower: float, width: float) -> Numeric:
     """``max(x, lower)`` with a hyperbolic corner of size ``width`` (smooth, exact far away)."""
     return 0.5 * (x + lower + ca.sqrt((x - lower) ** 2 + width**2))
 
 
 def frenet_kinematics(
-    v_x: Any, v_y: Any, r: Any, e_psi: Any, e_y: Any, kappa: Any, ops: Any = ca
-) -> tuple[Any, Any, Any]:
+    v_x: Numeric,
+    v_y: Numeric,
+    r: Numeric,
+    e_psi: Numeric,
+    e_y: Numeric,
+    kappa: Numeric,
+    ops: MathOps | ModuleType = ca,
+) -> tuple[Numeric, Numeric, Numeric]:
     """The Frenet kinematics of the paper's Eq. (2)-(4), for any math backend.
 
     The one definition of these rows: the model's dynamics use it, and so does any other model
@@ -139,8 +148,9 @@ def frenet_kinematics(
         Heading error (rad) and lateral offset (m, left positive) to the reference line.
     kappa : float, array or casadi expression
         Curvature of the reference line at the car's s, 1/m.
-    ops : module
-        Provides ``sin`` and ``cos``: ``casadi`` (default), ``numpy`` or ``math``.
+    ops : MathOps or module
+        Provides ``sin`` and ``cos``: the ``casadi`` module (default), ``numpy`` or ``math``, or a
+        backend of :mod:`racing_lib.vehicle.forces` (``CASADI_OPS``).
 
     Returns
     -------
@@ -231,7 +241,8 @@ def _symbols() -> tuple[ca.SX, ca.SX, ca.SX, ca.SX]:
 INPUT_NAMES = ["xi", "u", "kappa", "theta"]
 
 
-def check_args(params: Any, options: Any) -> None:
+def check_args(params: object, options: object) -> None:
+    """Refuse ``params`` that are not a ModelParams or ``options`` not a ModelOptions."""
     if not isinstance(params, ModelParams):
         raise ModelError(f"params must be a ModelParams; got {type(params).__name__}.")
     if not isinstance(options, ModelOptions):

@@ -11,10 +11,9 @@ from __future__ import annotations
 import functools
 import json
 from pathlib import Path
-from typing import Any
 
 from racing_lib.errors import ModelError
-from racing_lib.io import data_file
+from racing_lib.io import JSONObject, data_file
 from racing_lib.model.car_model import CarModel
 from racing_lib.model.params import ModelParams
 
@@ -45,7 +44,7 @@ def shipped_fit_path() -> Path:
     return data_file(DATA_FILE)
 
 
-def shipped_fit() -> dict[str, Any]:
+def shipped_fit() -> JSONObject:
     """The JSON of the shipped fit (``racing_lib/data/identified_params.json``)."""
     ref = data_file(DATA_FILE)
     try:

@@ -23,10 +23,12 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from racing_lib.errors import ModelError
+from racing_lib.io import JSONObject, atomic_write_json
 from racing_lib.model.states import NX, X, as_float, state_rows
 
 # The force laws are defined once, in racing_lib/vehicle/forces.py, for floats, numpy and CasADi
 from racing_lib.vehicle import (
+    Numeric,
     VehicleParams,
     axle_cornering_stiffness,
     static_axle_loads,
@@ -193,7 +195,7 @@ class PedalMap:
         """``[m_0, m_xi..., m_thr, m_brk]`` as a float array of shape (9,)."""
         return np.array([self.m_0, *self.m_xi, self.m_thr, self.m_brk])
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> JSONObject:
         """JSON-ready dictionary."""
         return {
             "m_0": self.m_0,
@@ -205,7 +207,7 @@ class PedalMap:
         }
 
     @classmethod
-    def from_dict(cls, data: Mapping[str, Any]) -> PedalMap:
+    def from_dict(cls, data: Mapping[str, object]) -> PedalMap:
         """Inverse of :meth:`to_dict`; unknown keys raise :class:`ModelError`."""
         _check_keys("PedalMap", data, {f.name for f in dataclasses.fields(cls)})
         kwargs = dict(data)
@@ -214,7 +216,7 @@ class PedalMap:
         return cls(**kwargs)
 
     # --- evaluation -------------------------------------------------------------------------------
-    def _base(self, xi: Any) -> Any:
+    def _base(self, xi: ArrayLike | ca.SX | ca.MX | ca.DM) -> Numeric:
         """``m_0 + m_xi . xi``: numpy rows ``(N, 6)`` -> ``(N,)``; CasADi columns -> ``1 x N``."""
         if isinstance(xi, ca.SX | ca.MX | ca.DM):
             if xi.size1() != NX:
@@ -224,7 +226,7 @@ class PedalMap:
         out = self.m_0 + xi @ np.asarray(self.m_xi)
         return out
 
-    def throttle_gain(self, v_x: Any) -> Any:
+    def throttle_gain(self, v_x: Numeric) -> Numeric:
         """Acceleration added by full throttle at speed ``v_x`` (m/s), m/s^2.
 
         ``min(m_thr, p_thr / v_x)`` (``m_thr`` without a power limit).
@@ -253,7 +255,7 @@ class PedalMap:
         u_k = -a_k / self.m_brk
         return u_k, a_k, (self.a_brk_max - a_k) / (1.0 + u_k)
 
-    def _brake(self, u_p: Any) -> Any:
+    def _brake(self, u_p: Numeric) -> Numeric:
         """Brake part of ``a_x`` (m/s^2, <= 0) for pedal(s) ``u_p``; numpy or CasADi."""
         sym = isinstance(u_p, ca.SX | ca.MX | ca.DM)
         fmin, fmax = (ca.fmin, ca.fmax) if sym else (np.minimum, np.maximum)
@@ -264,13 +266,13 @@ class PedalMap:
         u_k, _, slope = knee
         return self.m_brk * fmax(w, u_k) + slope * fmin(w - u_k, 0.0)
 
-    def _speed(self, xi: Any) -> Any:
+    def _speed(self, xi: ArrayLike | ca.SX | ca.MX | ca.DM) -> Numeric:
         """``v_x`` of state(s) ``xi``: CasADi row ``1 x N`` or numpy ``(N,)``."""
         if isinstance(xi, ca.SX | ca.MX | ca.DM):
             return xi[int(X.VX), :]
         return state_rows(xi)[:, X.VX]
 
-    def ax(self, xi: Any, u_p: Any) -> Any:
+    def ax(self, xi: ArrayLike | ca.SX | ca.MX | ca.DM, u_p: Numeric | ArrayLike) -> Numeric:
         """Tyre acceleration ``a_x`` (m/s^2) for state(s) ``xi`` and pedal ``u_p`` in [-1, 1].
 
         ``xi``: shape (6,) or (N, 6) (or a CasADi column / 6 x N matrix); ``u_p``: scalar or (N,).
@@ -284,7 +286,7 @@ class PedalMap:
         out = self._base(xi) + gain * np.maximum(u_p, 0.0) + self._brake(u_p)
         return float(out[0]) if scalar else out
 
-    def limits(self, xi: Any) -> tuple[Any, Any]:
+    def limits(self, xi: ArrayLike | ca.SX | ca.MX | ca.DM) -> tuple[Numeric, Numeric]:
         """``(a_min, a_max)`` in m/s^2 at full brake and full throttle for state(s) ``xi``.
 
         ``(a_min, a_max)`` in m/s^2: ``a_x`` at full brake (``u_p=-1``) and full throttle
@@ -315,7 +317,7 @@ class PedalMap:
         lo, hi = self.limits(xi)
         return lo.reshape(v.shape), hi.reshape(v.shape)
 
-    def pedal(self, a_x: ArrayLike, xi: ArrayLike) -> Any:
+    def pedal(self, a_x: ArrayLike, xi: ArrayLike) -> float | np.ndarray:
         """Pedal ``u_p`` in [-1, 1] that produces ``a_x`` (m/s^2) in state(s) ``xi``; clipped.
 
         Shapes as in :meth:`ax`; numpy only (the controller's last step).
@@ -356,7 +358,7 @@ def _select(cond: bool, a: float, b: float) -> float:
     return a if cond else b
 
 
-def _check_keys(what: str, data: Mapping[str, Any], allowed: set[str]) -> None:
+def _check_keys(what: str, data: Mapping[str, object], allowed: set[str]) -> None:
     if not isinstance(data, Mapping):
         raise ModelError(f"{what} data must be a mapping (JSON object); got {type(data).__name__}.")
     unknown = sorted(set(data) - allowed)
@@ -510,20 +512,20 @@ class ModelParams:
         """
         return self.mu * min(self.D_f, self.D_r) * self.g
 
-    def replace(self, **changes: Any) -> ModelParams:
+    def replace(self, **changes: float | PedalMap) -> ModelParams:
         """A copy with some fields changed (validated)."""
         return dataclasses.replace(self, **changes)
 
     # --- conversion -------------------------------------------------------------------------------
     @classmethod
-    def from_vehicle(cls, vehicle: Any, pedal: PedalMap | None = None) -> ModelParams:
+    def from_vehicle(cls, vehicle: VehicleParams, pedal: PedalMap | None = None) -> ModelParams:
         """The simulated car's true values (``racing_lib.vehicle.VehicleParams``).
 
         The pedal map is not a parameter of the car (its powertrain is nonlinear): pass an
         identified one, or get the placeholder default.
         """
         names = {f.name for f in dataclasses.fields(cls)} - {"pedal"}
-        values: dict[str, Any] = {}
+        values: dict[str, float] = {}
         missing = []
         for name in sorted(names):
             if hasattr(vehicle, name):
@@ -537,16 +539,16 @@ class ModelParams:
             )
         return cls(**values, pedal=pedal if pedal is not None else PedalMap())
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> JSONObject:
         """JSON-ready dictionary (the pedal map nested under ``"pedal"``)."""
-        out: dict[str, Any] = {
+        out: JSONObject = {
             f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name != "pedal"
         }
         out["pedal"] = self.pedal.to_dict()
         return out
 
     @classmethod
-    def from_dict(cls, data: Mapping[str, Any]) -> ModelParams:
+    def from_dict(cls, data: Mapping[str, object]) -> ModelParams:
         """Inverse of :meth:`to_dict`. Missing fields take their defaults; unknown ones raise."""
         _check_keys("ModelParams", data, {f.name for f in dataclasses.fields(cls)})
         kwargs = dict(data)
@@ -556,8 +558,6 @@ class ModelParams:
 
     def save(self, path: str | os.PathLike[str]) -> None:
         """Write as JSON, atomically (temporary file, then rename)."""
-        from racing_lib.io import atomic_write_json
-
         atomic_write_json(path, self.to_dict())
 
     @classmethod

@@ -14,11 +14,11 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
 
 from racing_lib.errors import ModelError
+from racing_lib.geometry import Track
 from racing_lib.model import Model, ModelOptions, ModelParams, U, X
 from racing_lib.model.actuator import lagged_steering
 from racing_lib.model.drive import Drive
@@ -35,7 +35,7 @@ __all__ = [
 ]
 
 
-def frenet_states(log: Drive, track: Any) -> np.ndarray:
+def frenet_states(log: Drive, track: Track) -> np.ndarray:
     """The model state ``xi`` of every observation of ``log`` on ``track``'s centerline.
 
     Parameters
@@ -70,7 +70,7 @@ def predict_open_loop(
     xi0: np.ndarray,
     steer: np.ndarray,
     pedal: np.ndarray,
-    track: Any,
+    track: Track,
     dt: float = 0.1,
     substeps: int = 4,
 ) -> np.ndarray:
@@ -227,7 +227,7 @@ def _horizon_steps(horizons: Sequence[float], dt: float) -> list[int]:
 
 def prediction_errors(
     log: Drive,
-    track: Any,
+    track: Track,
     params: ModelParams | None = None,
     options: ModelOptions | None = None,
     horizons: Sequence[float] = (0.5, 1.0),
@@ -360,11 +360,11 @@ ABLATION_VARIANTS: dict[str, ModelOptions] = {
 
 def prediction_table(
     log: Drive,
-    track: Any,
+    track: Track,
     params: ModelParams | None = None,
     variants: Mapping[str, ModelOptions] | None = None,
     horizons: Sequence[float] = (0.5, 1.0),
-    **kwargs: Any,
+    **kwargs: int | float | None,
 ) -> list[PredictionError]:
     """:func:`prediction_errors` for several model variants on the same drive.
 

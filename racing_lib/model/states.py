@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import math
 from enum import IntEnum
-from typing import Any, Literal
+from typing import Literal
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -49,7 +49,7 @@ NX: int = len(X)
 NU: int = len(U)
 
 
-def as_float(name: str, value: Any) -> float:
+def as_float(name: str, value: object) -> float:
     """``value`` as a finite float; ModelError naming ``name`` otherwise."""
     try:
         out = float(value)

@@ -31,15 +31,23 @@ from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import Executor, ProcessPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path as FilePath
-from typing import Any
+from typing import TYPE_CHECKING, Any, TypeAlias
 
 import numpy as np
 
 from racing_lib.config import fast_mode
 from racing_lib.errors import ControlError
-from racing_lib.io import atomic_write_bytes, atomic_write_json, jsonable
+from racing_lib.io import JSONObject, atomic_write_bytes, atomic_write_json, jsonable
 
-__all__ = ["CmaTuner", "SearchSpace", "TuningResult", "TuningSettings", "tune"]
+if TYPE_CHECKING:
+    # dask is an optional dependency (the "distributed" extra)
+    from distributed import Client
+
+__all__ = ["CmaTuner", "ExecutorLike", "SearchSpace", "TuningResult", "TuningSettings", "tune"]
+
+ExecutorLike: TypeAlias = "Executor | Client"
+"""Where candidates are evaluated: a ``concurrent.futures.Executor``, or a Dask
+``distributed.Client`` (used through ``client.get_executor()``)."""
 
 
 # --------------------------------------------------------------------------------------------------
@@ -116,7 +124,7 @@ class SearchSpace:
         xc = np.clip(np.asarray(x, dtype=float), lo, hi)
         return {name: float(10.0**v) for name, v in zip(self.names, xc, strict=True)}
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> dict[str, list[str] | list[float]]:
         """JSON-ready description."""
         return {
             "names": list(self.names),
@@ -166,18 +174,18 @@ class TuningSettings:
             )
 
     @classmethod
-    def default(cls, **overrides: Any) -> TuningSettings:
+    def default(cls, **overrides: int | float | None) -> TuningSettings:
         """The default settings, shrunk in fast mode (6 candidates x 3 generations).
 
         Fast mode (``RACING_LIB_FAST=1``) only lowers the budget; the algorithm is the same.
         """
-        values: dict[str, Any] = {}
+        values: dict[str, int | float | None] = {}
         if fast_mode():
             values.update(popsize=6, max_generations=3)
         values.update(overrides)
         return cls(**values)
 
-    def identity(self) -> dict[str, Any]:
+    def identity(self) -> dict[str, int | float | None]:
         """The settings that must match for a run to be resumed (all but the budget)."""
         out = dataclasses.asdict(self)
         out.pop("max_generations")
@@ -224,7 +232,7 @@ class TuningResult:
     status: str
     elapsed: float
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> JSONObject:
         """JSON-ready dict (non-finite numbers become None)."""
         return jsonable(dataclasses.asdict(self))
 
@@ -360,7 +368,7 @@ class CmaTuner:
     def run(
         self,
         *,
-        executor: Any = None,
+        executor: ExecutorLike | None = None,
         workers: int | None = 1,
         out_dir: str | os.PathLike[str] | None = None,
         resume: bool = False,
@@ -456,7 +464,7 @@ class CmaTuner:
         return state
 
     def _generation(
-        self, state: dict[str, Any], executor: Any, elapsed0: float, t_run: float
+        self, state: dict[str, Any], executor: Executor | None, elapsed0: float, t_run: float
     ) -> None:
         """One generation: ask for candidates, evaluate them, tell the strategy, record it.
 
@@ -521,8 +529,8 @@ class CmaTuner:
 
 
 def _candidate_executor(
-    executor: Any, workers: int | None
-) -> tuple[Any, ProcessPoolExecutor | None]:
+    executor: ExecutorLike | None, workers: int | None
+) -> tuple[Executor | None, ProcessPoolExecutor | None]:
     """Where a run evaluates its candidates, and the pool it made for that (to shut down).
 
     Parameters
@@ -558,7 +566,7 @@ def tune(
     space: SearchSpace,
     settings: TuningSettings | None = None,
     *,
-    executor: Any = None,
+    executor: ExecutorLike | None = None,
     workers: int | None = 1,
     out_dir: str | os.PathLike[str] | None = None,
     resume: bool = False,

@@ -91,7 +91,7 @@ class PlanResult:
         """Planned lap time, s."""
         return self.trajectory.lap_time
 
-    def summary(self, track: Any = None) -> dict[str, Any]:
+    def summary(self, track: Track | None = None) -> dict[str, str | int | float | None]:
         """The fields of ``racing-lib plan --json``."""
         traj = self.trajectory
         return {

@@ -44,11 +44,12 @@ import time
 from dataclasses import dataclass, field
 from enum import IntEnum
 from types import SimpleNamespace
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from racing_lib.errors import PlanningError
+from racing_lib.geometry import Track
 from racing_lib.model import frenet_kinematics, identified_params
 from racing_lib.planning.grid import DEFAULT_CAR_WIDTH, TrackGrid
 from racing_lib.planning.time_optimal import (
@@ -60,9 +61,20 @@ from racing_lib.planning.time_optimal import (
     trapezoid_lap_time,
 )
 from racing_lib.planning.trajectory import Trajectory
-from racing_lib.vehicle import VehicleParams
-from racing_lib.vehicle.dynamics import SimState, tyre_limits
+from racing_lib.vehicle import (
+    CASADI_OPS,
+    MathOps,
+    Numeric,
+    VehicleParams,
+    drive_force_envelope,
+    wheel_loads,
+)
+from racing_lib.vehicle.dynamics import SimState, car_vector_field, tyre_limits
 from racing_lib.vehicle.forces import slip_angles
+
+if TYPE_CHECKING:
+    # casadi is imported where a problem is built: importing the planners stays cheap
+    import casadi as ca
 
 __all__ = [
     "BestLapResult",
@@ -94,7 +106,9 @@ _NV = len(V)
 _SCALE = np.array([30.0, 1.0, 0.5, 0.1, 0.2, 5.0, 0.1, 5000.0, 10000.0, 5.0, 10.0])
 
 
-def _wheel_limits(p: VehicleParams, fz: Any, front: bool, alpha: Any, ops: Any) -> tuple[Any, Any]:
+def _wheel_limits(
+    p: VehicleParams, fz: Numeric, front: bool, alpha: Numeric, ops: MathOps
+) -> tuple[Numeric, Numeric]:
     """Brake (ABS) and drive (traction control) limits of one wheel, N.
 
     The sim's tyre law (:func:`racing_lib.vehicle.dynamics.tyre_limits`) with its floors' kinks
@@ -104,7 +118,7 @@ def _wheel_limits(p: VehicleParams, fz: Any, front: bool, alpha: Any, ops: Any) 
     w_half = 0.5 * p.m * p.g / (p.l_f + p.l_r)
     fz_static = w_half * (p.l_r if front else p.l_f)
 
-    def soft_max(a: Any, floor2: float) -> Any:
+    def soft_max(a: Numeric, floor2: float) -> Numeric:
         eps = 1e-2
         return 0.5 * (a + floor2 + ops.sqrt((a - floor2) ** 2 + eps * eps))
 
@@ -114,7 +128,7 @@ def _wheel_limits(p: VehicleParams, fz: Any, front: bool, alpha: Any, ops: Any) 
     return f_brake_max, f_drive_max
 
 
-def _smooth_ops(rel: float) -> Any:
+def _smooth_ops(rel: float) -> MathOps:
     """CasADi backend whose min/max are rounded off over ``rel`` of the arguments' size.
 
     The vector field's clamps (a tyre at its limit on the lighter wheel of an axle) are kinks;
@@ -123,16 +137,14 @@ def _smooth_ops(rel: float) -> Any:
     """
     import casadi as ca
 
-    from racing_lib.vehicle import CASADI_OPS
-
     if rel <= 0.0:
         return CASADI_OPS
 
-    def smax(a: Any, b: Any) -> Any:
+    def smax(a: Numeric, b: Numeric) -> Numeric:
         d = a - b
         return 0.5 * (a + b + ca.sqrt(d * d + rel * rel * (a * a + b * b) + 1e-12))
 
-    def smin(a: Any, b: Any) -> Any:
+    def smin(a: Numeric, b: Numeric) -> Numeric:
         return -smax(-a, -b)
 
     names = ("sin", "cos", "tan", "atan", "sqrt", "tanh", "fabs")
@@ -211,7 +223,7 @@ class BestLapSettings:
     rate_margin: float = 0.98
     print_level: int = 0
     graph: str = "sx"
-    ipopt_options: tuple[tuple[str, Any], ...] = ()
+    ipopt_options: tuple[tuple[str, str | float], ...] = ()
 
 
 @dataclass
@@ -256,12 +268,11 @@ class BestLapResult:
     warm_start_time: float = 0.0
 
 
-def _node_function(p: VehicleParams, st: BestLapSettings) -> tuple[Any, list[float], list[float]]:
+def _node_function(
+    p: VehicleParams, st: BestLapSettings
+) -> tuple[ca.Function, list[float], list[float]]:
     """CasADi function of one node: (w scaled, kappa, theta) -> (dstate/ds, path g, 1/s_dot)."""
     import casadi as ca
-
-    from racing_lib.vehicle import CASADI_OPS, drive_force_envelope, wheel_loads
-    from racing_lib.vehicle.dynamics import car_vector_field
 
     ops = CASADI_OPS
     w = ca.SX.sym("w", _NV)
@@ -377,7 +388,9 @@ class _Problem:
         self.build_time = time.perf_counter() - t0
 
 
-def _bounds(grid: TrackGrid, p: VehicleParams, st: BestLapSettings) -> tuple[Any, Any]:
+def _bounds(
+    grid: TrackGrid, p: VehicleParams, st: BestLapSettings
+) -> tuple[np.ndarray, np.ndarray]:
     n = grid.n
     lo = np.full((_NV, n), -1e3)
     hi = np.full((_NV, n), 1e3)
@@ -428,10 +441,10 @@ def _cold_guess(grid: TrackGrid, p: VehicleParams, speed: float) -> np.ndarray:
 
 
 def solve_best_lap(
-    track: Any,
+    track: Track,
     vehicle: VehicleParams | None = None,
     settings: BestLapSettings | None = None,
-    start: Any = None,
+    start: str | TimeOptimalResult | None = None,
     *,
     cold_speed: float = 10.0,
     raise_on_failure: bool = True,

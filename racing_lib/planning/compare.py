@@ -19,16 +19,35 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import Protocol, TypeAlias
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from racing_lib.errors import PlanningError
+from racing_lib.geometry import Corner, Path, Track
 from racing_lib.model import ModelOptions, ModelParams
 from racing_lib.planning.trajectory import Trajectory, model_inputs
 
 
-def _line_xy(line: Any) -> tuple[np.ndarray, np.ndarray]:
+class HasXY(Protocol):
+    """Anything with ``x`` and ``y`` arrays of points, m: a :class:`Trajectory`, a drive's log."""
+
+    @property
+    def x(self) -> ArrayLike:
+        """The points' x, m."""
+
+    @property
+    def y(self) -> ArrayLike:
+        """The points' y, m."""
+
+
+Line: TypeAlias = "HasXY | tuple[ArrayLike, ArrayLike]"
+"""A closed line, m: an object with ``x`` and ``y`` arrays (:class:`HasXY`) or an ``(x, y)``
+pair (first point not repeated at the end)."""
+
+
+def _line_xy(line: Line) -> tuple[np.ndarray, np.ndarray]:
     """(x, y) arrays of a line given as an object with ``x``/``y`` or as an ``(x, y)`` pair."""
     if isinstance(line, tuple | list) and len(line) == 2:
         x, y = line
@@ -50,8 +69,8 @@ def _line_xy(line: Any) -> tuple[np.ndarray, np.ndarray]:
 
 
 def speed_profile_trajectory(
-    track: Any,
-    line: Any,
+    track: Track,
+    line: Line,
     params: ModelParams,
     options: ModelOptions | None = None,
     *,
@@ -98,8 +117,6 @@ def speed_profile_trajectory(
     >>> 100.0 < traj.lap_time < 120.0
     True
     """
-    from racing_lib.geometry import Path
-
     if not spacing > 0:
         raise PlanningError(f"spacing must be positive, got {spacing!r} m.")
     params, pedal_map, options = model_inputs(params, None, options, "speed_profile_trajectory")
@@ -116,8 +133,8 @@ def speed_profile_trajectory(
 
 
 def line_lap_time(
-    track: Any,
-    line: Any,
+    track: Track,
+    line: Line,
     params: ModelParams,
     options: ModelOptions | None = None,
     *,
@@ -132,7 +149,7 @@ def line_lap_time(
     return traj.lap_time
 
 
-def _on_centerline(track: Any, traj: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _on_centerline(track: Track, traj: Line) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Centerline arc length (unwrapped from the first node, increasing), e_y and t of the nodes."""
     x, y = _line_xy(traj)
     s_c, e_y = track.centerline.to_frenet_along(x, y)
@@ -149,7 +166,7 @@ def _on_centerline(track: Any, traj: Any) -> tuple[np.ndarray, np.ndarray, np.nd
     return s_c, np.asarray(e_y, float), t
 
 
-def time_along_centerline(track: Any, traj: Trajectory, s: Any) -> np.ndarray:
+def time_along_centerline(track: Track, traj: Trajectory, s: ArrayLike) -> np.ndarray:
     """Time (s) at which ``traj`` passes the centerline arc lengths ``s`` (m), from s = 0.
 
     The trajectory's nodes are projected onto the centerline and its time interpolated there, so
@@ -169,7 +186,7 @@ def time_along_centerline(track: Any, traj: Trajectory, s: Any) -> np.ndarray:
 
 
 def time_gap(
-    track: Any, reference: Trajectory, other: Trajectory, n: int = 2000
+    track: Track, reference: Trajectory, other: Trajectory, n: int = 2000
 ) -> tuple[np.ndarray, np.ndarray]:
     """Where along the track ``other`` gains or loses time against ``reference``.
 
@@ -300,9 +317,9 @@ class CornerLine:
 
 
 def corner_summary(
-    track: Any,
+    track: Track,
     plans: Mapping[str, Trajectory],
-    corners: Iterable[Any] | None = None,
+    corners: Iterable[Corner] | None = None,
     *,
     lead: float = 100.0,
 ) -> list[CornerLine]:
@@ -370,6 +387,8 @@ def corner_summary(
 
 __all__ = [
     "CornerLine",
+    "HasXY",
+    "Line",
     "PlanSummary",
     "compare_plans",
     "corner_summary",

@@ -67,18 +67,23 @@ import math
 import time
 from dataclasses import dataclass, field
 from enum import IntEnum
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 import scipy.sparse as sp
 
 from racing_lib.errors import PlanningError
+from racing_lib.geometry import Track
+from racing_lib.model import X, jacobians, spatial_dynamics
 from racing_lib.model.car_model import CarModel
+from racing_lib.model.params import ModelOptions, PedalMap
 from racing_lib.planning.grid import DEFAULT_CAR_WIDTH, TrackGrid
-from racing_lib.planning.speed import segment_times, speed_profile
+from racing_lib.planning.speed import AccelLimits, SpeedProfile, segment_times, speed_profile
 from racing_lib.planning.trajectory import Trajectory, model_inputs
 
 if TYPE_CHECKING:
+    import casadi as ca
+
     from racing_lib.model.params import ModelParams
 
 
@@ -366,9 +371,9 @@ def _lateral_qp(
 
 
 def solve_curvature(
-    track: Any,
+    track: Track,
     params: ModelParams,
-    options: Any = None,
+    options: ModelOptions | None = None,
     settings: CurvatureSettings | None = None,
     *,
     grid: TrackGrid | None = None,
@@ -411,8 +416,6 @@ def solve_curvature(
     >>> res.success, round(res.trajectory.lap_time)
     (True, 106)
     """
-    from racing_lib.model import jacobians, spatial_dynamics
-
     st = settings or CurvatureSettings()
     params, pedal, options = model_inputs(params, None, options, "solve_curvature")
     t_start = time.perf_counter()
@@ -477,7 +480,7 @@ class _LineIteration:
     kappa: np.ndarray
     s: np.ndarray
     length: float
-    prof: Any = None
+    prof: SpeedProfile | None = None
     sol: np.ndarray | None = None
     v_hat_prev: np.ndarray | None = None
     history: list[float] = field(default_factory=list)
@@ -486,7 +489,7 @@ class _LineIteration:
     it: int = 0
     status: str = "not_run"
     success: bool = False
-    best: tuple[float, Any] | None = None
+    best: tuple[float, tuple] | None = None
     since_best: int = 0
 
 
@@ -494,10 +497,10 @@ def _line_profile(
     run: _LineIteration,
     grid: TrackGrid,
     params: ModelParams,
-    pedal: Any,
-    options: Any,
+    pedal: PedalMap | AccelLimits,
+    options: ModelOptions,
     st: CurvatureSettings,
-) -> Any:
+) -> SpeedProfile:
     """The speed profile (:func:`speed_profile`) of the iteration's current line."""
     return speed_profile(
         run.s, run.kappa, params, pedal, grid.theta, st.v_top, options, length=run.length
@@ -516,8 +519,8 @@ def _next_v_hat(run: _LineIteration, st: CurvatureSettings) -> np.ndarray:
 
 
 def _linearized_lateral(
-    jac: Any,
-    f_s: Any,
+    jac: ca.Function,
+    f_s: ca.Function,
     grid: TrackGrid,
     params: ModelParams,
     run: _LineIteration,
@@ -531,8 +534,6 @@ def _linearized_lateral(
     A (N, 4, 4), B (N, 4) and f0 (N, 4) with d xi / ds ~= A xi + B delta + f0 (per m) for the
     lateral state xi (as ``_LAT``).
     """
-    from racing_lib.model import X
-
     n = grid.n
     lat = [int(getattr(X, name)) for name in _LAT]
     # Linearize at steady cornering on the current line at v_hat: with the tyres on the
@@ -562,7 +563,7 @@ def _linearized_lateral(
     return A, B, f0
 
 
-def _qp_failure_message(it: int, status: str, st: CurvatureSettings, track: Any) -> str:
+def _qp_failure_message(it: int, status: str, st: CurvatureSettings, track: Track) -> str:
     """What went wrong in QP iteration ``it`` (solver status ``status``) and what to try."""
     return (
         f"curvature QP iteration {it}: {st.solver} (via cvxpy) returned status "
@@ -578,8 +579,8 @@ def _move_line(
     new: np.ndarray,
     grid: TrackGrid,
     params: ModelParams,
-    pedal: Any,
-    options: Any,
+    pedal: PedalMap | AccelLimits,
+    options: ModelOptions,
     st: CurvatureSettings,
 ) -> bool:
     """Move the line towards the QP solution ``new`` (N, 5), profile it, keep the fastest.
@@ -621,7 +622,7 @@ def _move_line(
 def _curvature_result(
     run: _LineIteration,
     grid: TrackGrid,
-    track: Any,
+    track: Track,
     model: CarModel,
     st: CurvatureSettings,
     t_start: float,
@@ -666,10 +667,10 @@ def _trajectory_from_line(
     e_y: np.ndarray,
     e_psi: np.ndarray,
     sol: np.ndarray,
-    prof: Any,
+    prof: SpeedProfile,
     kappa_line: np.ndarray,
     line_length: float,
-    track: Any,
+    track: Track,
     model: CarModel,
 ) -> Trajectory:
     """The curvature plan as a Trajectory: the QP's line driven at its full speed profile.

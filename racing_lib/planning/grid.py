@@ -9,11 +9,12 @@ come off each side.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
 from racing_lib.errors import PlanningError
+from racing_lib.geometry import Track
+from racing_lib.geometry.path import Path, chord_arc_length
 from racing_lib.vehicle.params import VehicleParams
 
 __all__ = ["DEFAULT_CAR_WIDTH", "OPEN_MARGIN", "WALL_MARGIN", "TrackGrid"]
@@ -57,7 +58,7 @@ class TrackGrid:
     ey_min: np.ndarray
     ey_max: np.ndarray
     length: float
-    track: Any = None
+    track: Track | None = None
 
     @property
     def n(self) -> int:
@@ -67,7 +68,7 @@ class TrackGrid:
     @classmethod
     def from_track(
         cls,
-        track: Any,
+        track: Track,
         spacing: float = 3.0,
         car_width: float = DEFAULT_CAR_WIDTH,
         margin: float | None = None,
@@ -122,14 +123,17 @@ class TrackGrid:
             track=track,
         )
 
-    def line_xy(self, e_y: np.ndarray, e_psi: np.ndarray | None = None) -> tuple[Any, Any, Any]:
+    def line_xy(
+        self, e_y: np.ndarray, e_psi: np.ndarray | None = None
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Cartesian (x, y, psi) of a line given by its offsets e_y (m) at the nodes."""
         return self.track.centerline.to_cartesian(self.s, e_y, e_psi)
 
-    def line_curvature(self, e_y: np.ndarray) -> np.ndarray:
-        """Curvature (1/m) at the nodes of the line with offsets e_y, from a spline through it."""
-        from racing_lib.geometry.path import Path, chord_arc_length
+    def line_curvature(self, e_y: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+        """Curvature (1/m) at the nodes of the line with offsets e_y, from a spline through it.
 
+        Returns the curvature, the nodes' arc length along the line (m) and its length (m).
+        """
         x, y, _ = self.line_xy(e_y)
         path = Path(x, y, check=False)
         s_line = chord_arc_length(x, y, path.length)

@@ -25,14 +25,14 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
 
 from racing_lib.errors import PlanningError
-from racing_lib.model.params import ModelParams
-from racing_lib.vehicle.params import G
+from racing_lib.model.params import ModelOptions, ModelParams, PedalMap
+from racing_lib.model.states import X
+from racing_lib.vehicle.params import G, VehicleParams
 
 #: Top speed used when neither the caller nor the parameters give one: 190 km/h, m/s.
 DEFAULT_V_TOP = 190.0 / 3.6
@@ -40,6 +40,7 @@ DEFAULT_V_TOP = 190.0 / 3.6
 _DEFAULTS = ModelParams()
 
 AccelLimits = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
+"""Tyre acceleration limits: speeds v (m/s) -> (a_x_min, a_x_max) (m/s^2), element-wise."""
 
 
 @dataclass(frozen=True)
@@ -84,7 +85,7 @@ class SpeedProfile:
         return np.interp(np.asarray(s, dtype=float), self.s, self.v, period=length)
 
 
-def _param(params: Any, name: str) -> float:
+def _param(params: ModelParams | VehicleParams, name: str) -> float:
     """``params.name`` as a float, or the planning model's default (:class:`ModelParams`).
 
     Any object with the attribute names of :class:`ModelParams` serves (the simulated car's
@@ -103,7 +104,7 @@ def segment_times(ds: ArrayLike, v_start: ArrayLike, v_end: ArrayLike) -> np.nda
     return 2.0 * ds / (v_start + v_end)
 
 
-def pedal_accel_limits(pedal_map: Any) -> AccelLimits | None:
+def pedal_accel_limits(pedal_map: PedalMap | AccelLimits | None) -> AccelLimits | None:
     """Adapter: a function v -> (a_x_min, a_x_max) from a pedal map, or None.
 
     Accepts :class:`racing_lib.model.PedalMap` (``limits(xi)`` with the state xi, evaluated at
@@ -117,8 +118,6 @@ def pedal_accel_limits(pedal_map: Any) -> AccelLimits | None:
     if hasattr(pedal_map, "limits"):
 
         def limits(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-            from racing_lib.model import X  # local: speed.py must import without the model
-
             v = np.atleast_1d(np.asarray(v, dtype=float))
             xi = np.zeros((v.size, len(X)))  # one state per row, as PedalMap expects
             xi[:, X.VX] = v
@@ -140,11 +139,11 @@ def pedal_accel_limits(pedal_map: Any) -> AccelLimits | None:
 def speed_profile(
     s: ArrayLike,
     kappa: ArrayLike,
-    params: Any = None,
-    pedal_map: Any = None,
+    params: ModelParams | VehicleParams | None = None,
+    pedal_map: PedalMap | AccelLimits | None = None,
     theta: ArrayLike | None = None,
     v_top: float | None = None,
-    options: Any = None,
+    options: ModelOptions | None = None,
     *,
     length: float | None = None,
     closed: bool = True,
@@ -161,7 +160,7 @@ def speed_profile(
         Increasing arc length of the nodes, m. On a closed path the first node is not repeated.
     kappa : array_like, shape (N,)
         Curvature of the path at the nodes, 1/m.
-    params : ModelParams, optional
+    params : ModelParams or VehicleParams, optional
         Planning parameters; read: ``mu``, ``D_f``, ``D_r`` (the friction circle's radius is
         ``mu min(D_f, D_r) g``), ``m`` (kg), ``C_xw`` (kg/m), ``c_rr`` (-) and ``pedal``. Any
         object with these names serves (the simulated car's ``VehicleParams`` does); a missing
@@ -302,7 +301,9 @@ class _PointMass:
     v_top: float
 
 
-def _point_mass(params: Any, options: Any, v_top: float | None) -> _PointMass:
+def _point_mass(
+    params: ModelParams | VehicleParams, options: ModelOptions | None, v_top: float | None
+) -> _PointMass:
     """The point-mass constants of ``params`` (see :func:`speed_profile`), checked.
 
     Parameters
@@ -363,7 +364,7 @@ class _Road:
 
 
 def _road(
-    params: Any,
+    params: ModelParams | VehicleParams,
     car: _PointMass,
     kappa: np.ndarray,
     theta: np.ndarray,

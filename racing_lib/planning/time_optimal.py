@@ -58,7 +58,10 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from racing_lib.errors import PlanningError
+from racing_lib.geometry import Track
+from racing_lib.model import NX, X
 from racing_lib.model.car_model import CarModel
+from racing_lib.model.params import ModelOptions
 from racing_lib.planning.curvature import (
     CurvatureResult,
     CurvatureSettings,
@@ -74,7 +77,11 @@ from racing_lib.planning.time_optimal_nlp import (
     StructuredNLP,
     interval_functions,
 )
-from racing_lib.planning.time_optimal_settings import TimeOptimalResult, TimeOptimalSettings
+from racing_lib.planning.time_optimal_settings import (
+    IpoptSettings,
+    TimeOptimalResult,
+    TimeOptimalSettings,
+)
 from racing_lib.planning.trajectory import Trajectory, model_inputs
 
 __all__ = [
@@ -88,6 +95,9 @@ __all__ = [
 ]
 
 if TYPE_CHECKING:
+    # casadi is imported where a problem is built: importing the planners stays cheap
+    import casadi as ca
+
     from racing_lib.model.params import ModelParams
 
 _VARS = NLP_VARS
@@ -104,7 +114,7 @@ _NXS = NXS
 #: (medians warm / cold 26 / 28 against 29.5 / 29.5) but made the best-lap NLP, which starts from
 #: this plan, end on an OpenBLAS-kernel-dependent solution (lap 20.389 s under Sandybridge against
 #: 20.380 s), so 1e-4 stays: with it both kernels give the same plans.
-STARTING_BARRIER: tuple[tuple[str, Any], ...] = (
+STARTING_BARRIER: tuple[tuple[str, str | float], ...] = (
     ("mu_init", 1e-4),
     ("bound_mult_init_method", "mu-based"),
 )
@@ -137,7 +147,7 @@ class _Problem:
     """The built NLP for one grid, parameter set, options and settings."""
 
     def __init__(
-        self, grid: TrackGrid, params: ModelParams, options: Any, st: TimeOptimalSettings
+        self, grid: TrackGrid, params: ModelParams, options: ModelOptions, st: TimeOptimalSettings
     ) -> None:
         t0 = time.perf_counter()
         self.n = grid.n
@@ -154,7 +164,9 @@ class _Problem:
         self.lap_fn = nlp.lap_fn
         self.build_time = time.perf_counter() - t0
 
-    def bounds(self, ax_lo: np.ndarray, ax_hi: np.ndarray, v_top: float) -> tuple[Any, Any]:
+    def bounds(
+        self, ax_lo: np.ndarray, ax_hi: np.ndarray, v_top: float
+    ) -> tuple[np.ndarray, np.ndarray]:
         st = self.settings
         n = self.n
         lo = np.empty((len(_VARS), n))
@@ -178,8 +190,12 @@ _CACHE_SIZE = 4
 
 
 def _problem(
-    grid: TrackGrid, track: Any, params: ModelParams, options: Any, st: TimeOptimalSettings
-):
+    grid: TrackGrid,
+    track: Track,
+    params: ModelParams,
+    options: ModelOptions,
+    st: TimeOptimalSettings,
+) -> tuple[_Problem, float]:
     key = (
         track.checksum() if hasattr(track, "checksum") else id(track),
         grid.n,
@@ -206,7 +222,7 @@ def clear_cache() -> None:
 
 
 def _initial_guess(
-    grid: TrackGrid, params: ModelParams, start: Any, cold_speed: float
+    grid: TrackGrid, params: ModelParams, start: str | CurvatureResult, cold_speed: float
 ) -> tuple[np.ndarray, str]:
     """Initial values (7, N) in physical units, and the kind of start."""
     n = grid.n
@@ -271,7 +287,7 @@ def _failure_advice(kind: str, st: TimeOptimalSettings, status: str) -> str:
     return "; ".join(tips)
 
 
-def _option_advice(st: Any) -> str:
+def _option_advice(st: IpoptSettings) -> str:
     """What to check when IPOPT refuses the options of settings ``st`` (any planner's)."""
     extra = f"ipopt_options {st.ipopt_options!r}, " if st.ipopt_options else ""
     return (
@@ -281,8 +297,10 @@ def _option_advice(st: Any) -> str:
     )
 
 
-def trapezoid_lap_time(inv_sdot: Any, grid: Any) -> Any:
+def trapezoid_lap_time(inv_sdot: ca.SX | ca.MX, grid: TrackGrid) -> ca.SX | ca.MX:
     """Lap time (s) from the nodes' 1/s_dot (s/m), by the trapezoid rule on the periodic grid.
+
+    ``inv_sdot`` is a CasADi row (1 x N) of the nodes' 1/s_dot; the result is of its kind.
 
     Each node's weight is half of the two intervals (m) it touches, so the sum runs once round
     the lap. Shared with :mod:`racing_lib.planning.best_lap`.
@@ -295,11 +313,11 @@ def trapezoid_lap_time(inv_sdot: Any, grid: Any) -> Any:
 
 def ipopt_solver(
     name: str,
-    nlp: dict[str, Any],
-    st: Any,
-    derivatives: dict[str, Any] | None = None,
-    defaults: tuple[tuple[str, Any], ...] = (),
-) -> Any:
+    nlp: dict[str, ca.SX | ca.MX],
+    st: IpoptSettings,
+    derivatives: dict[str, ca.Function] | None = None,
+    defaults: tuple[tuple[str, str | float], ...] = (),
+) -> ca.Function:
     """CasADi's IPOPT ``nlpsol`` for ``nlp`` with the planners' options.
 
     The exact Hessian (CasADi differentiates the model symbolically, so it costs little) and the
@@ -335,12 +353,12 @@ def ipopt_solver(
 
 
 def solve_time_optimal(
-    track: Any,
+    track: Track,
     params: ModelParams,
-    options: Any = None,
+    options: ModelOptions | None = None,
     settings: TimeOptimalSettings | None = None,
     *,
-    start: Any = DEFAULT_START,
+    start: str | CurvatureResult = DEFAULT_START,
     curvature_settings: CurvatureSettings | None = None,
     cold_speed: float = 10.0,
     raise_on_failure: bool = True,
@@ -428,10 +446,10 @@ def solve_time_optimal(
 
 
 def _check_friction(
-    track: Any,
+    track: Track,
     grid: TrackGrid,
     params: ModelParams,
-    options: Any,
+    options: ModelOptions,
     st: TimeOptimalSettings,
     v_top: float,
 ) -> None:
@@ -603,7 +621,7 @@ def _solve_with_ax_limits(
 
 
 def _read_solution(
-    prob: _Problem, grid: TrackGrid, solves: _Solves, track: Any, options: Any
+    prob: _Problem, grid: TrackGrid, solves: _Solves, track: Track, options: ModelOptions
 ) -> tuple[Trajectory | None, float, dict[str, np.ndarray]]:
     """The plan, its lap time (s) and the named NLP values of the last solution.
 
@@ -637,7 +655,7 @@ def _trajectory(
     grid: TrackGrid,
     z: np.ndarray,
     dt: np.ndarray,
-    track: Any,
+    track: Track,
     model: CarModel,
     status: str,
     iters: list[int],
@@ -662,8 +680,6 @@ def _trajectory(
 
 def _model_states(z: np.ndarray, grid: TrackGrid) -> np.ndarray:
     """Model states (N, 6), rows in :class:`racing_lib.model.X` order, from NLP values (7, N)."""
-    from racing_lib.model import NX, X
-
     xi = np.zeros((grid.n, NX))
     for i, name in enumerate(_VARS[:_NXS]):
         xi[:, int(X[name])] = z[i]

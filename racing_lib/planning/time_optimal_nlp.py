@@ -34,12 +34,19 @@ from __future__ import annotations
 
 import functools
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from racing_lib.errors import PlanningError
 from racing_lib.jit import compiled_or_interpreted
+from racing_lib.model import NU, NX, U, X, model_terms, spatial_dynamics
+from racing_lib.model.params import ModelOptions, ModelParams
+from racing_lib.planning.time_optimal_settings import TimeOptimalSettings
+
+if TYPE_CHECKING:
+    # casadi is imported where a problem is built: importing the planners stays cheap
+    import casadi as ca
 
 __all__ = ["IntervalFunctions", "StructuredNLP", "interval_functions", "NLP_VARS", "NLP_SCALE"]
 
@@ -85,14 +92,14 @@ class IntervalFunctions:
         Bounds of one node's path constraints.
     """
 
-    con: Any
-    con_jac: Any
-    obj: Any
-    obj_grad: Any
-    hess: Any
-    inv_sdot: Any
-    jac_sparsity: Any
-    hess_sparsity: Any
+    con: ca.Function
+    con_jac: ca.Function
+    obj: ca.Function
+    obj_grad: ca.Function
+    hess: ca.Function
+    inv_sdot: ca.Function
+    jac_sparsity: ca.Sparsity
+    hess_sparsity: ca.Sparsity
     lb_path: np.ndarray
     ub_path: np.ndarray
 
@@ -102,11 +109,16 @@ class IntervalFunctions:
         return NXS + len(self.lb_path)
 
 
-def _path_constraints(params: Any, st: Any, z: Any, xi: Any, u: Any, terms: dict) -> tuple:
+def _path_constraints(
+    params: ModelParams,
+    st: TimeOptimalSettings,
+    z: ca.SX,
+    xi: ca.SX,
+    u: ca.SX,
+    terms: dict[str, ca.SX],
+) -> tuple[list[ca.SX], np.ndarray, np.ndarray]:
     """One node's path constraints (CasADi expressions) and their bounds, in scaled form."""
     import casadi as ca
-
-    from racing_lib.model import U, X
 
     path, lb, ub = [], [], []
     if st.slip_limit:
@@ -148,11 +160,11 @@ def _path_constraints(params: Any, st: Any, z: Any, xi: Any, u: Any, terms: dict
     return path, np.array(lb, float), np.array(ub, float)
 
 
-def _node_function(params: Any, options: Any, st: Any) -> tuple[Any, np.ndarray, np.ndarray]:
+def _node_function(
+    params: ModelParams, options: ModelOptions, st: TimeOptimalSettings
+) -> tuple[ca.Function, np.ndarray, np.ndarray]:
     """One node's ``(w, d) -> (dxi/ds of the 5 states, path constraints, 1/s_dot)``."""
     import casadi as ca
-
-    from racing_lib.model import NU, NX, U, X, model_terms, spatial_dynamics
 
     w = ca.SX.sym("w", _NW)
     d = ca.SX.sym("d", 3)  # kappa (1/m), theta (rad), s (m)
@@ -174,7 +186,9 @@ def _node_function(params: Any, options: Any, st: Any) -> tuple[Any, np.ndarray,
 
 
 @functools.lru_cache(maxsize=16)
-def interval_functions(params: Any, options: Any, st: Any) -> IntervalFunctions:
+def interval_functions(
+    params: ModelParams, options: ModelOptions, st: TimeOptimalSettings
+) -> IntervalFunctions:
     """The interval functions for a parameter set, options and settings (cached).
 
     Parameters

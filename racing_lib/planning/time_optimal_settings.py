@@ -3,14 +3,34 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Protocol
 
 import numpy as np
 
 from racing_lib.planning.grid import DEFAULT_CAR_WIDTH, TrackGrid
 from racing_lib.planning.trajectory import Trajectory
 
-__all__ = ["TimeOptimalResult", "TimeOptimalSettings"]
+__all__ = ["IpoptSettings", "TimeOptimalResult", "TimeOptimalSettings"]
+
+
+class IpoptSettings(Protocol):
+    """What a planner's settings tell IPOPT: :class:`TimeOptimalSettings`, ``BestLapSettings``."""
+
+    @property
+    def print_level(self) -> int:
+        """IPOPT's print level (0: silent)."""
+
+    @property
+    def max_iter(self) -> int:
+        """Most IPOPT iterations."""
+
+    @property
+    def tol(self) -> float:
+        """IPOPT's convergence tolerance."""
+
+    @property
+    def ipopt_options(self) -> tuple[tuple[str, str | float], ...]:
+        """Further IPOPT options, (name, value) pairs; they override the planner's."""
 
 
 @dataclass(frozen=True)
@@ -104,7 +124,7 @@ class TimeOptimalSettings:
     outer_tol: float = 0.05
     v_top: float | None = None
     print_level: int = 0
-    ipopt_options: tuple[tuple[str, Any], ...] = ()
+    ipopt_options: tuple[tuple[str, str | float], ...] = ()
     mu_min: float = 0.1
     graph: str = "structured"
     jit: bool = True

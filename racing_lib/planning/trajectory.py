@@ -19,6 +19,7 @@ import io
 import json
 import math
 import os
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from functools import cached_property
 from typing import Any
@@ -27,10 +28,12 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from racing_lib.errors import ModelError, PlanningError, RacingLibError
+from racing_lib.geometry import Path, Track
+from racing_lib.geometry.path import chord_arc_length
 from racing_lib.io import atomic_write_text
 from racing_lib.model.car_model import CarModel
-from racing_lib.model.params import ModelParams
-from racing_lib.planning.speed import segment_times, speed_profile
+from racing_lib.model.params import ModelOptions, ModelParams, PedalMap
+from racing_lib.planning.speed import AccelLimits, segment_times, speed_profile
 
 #: Version of the plan CSV format written by :meth:`Trajectory.save_csv`: 3 adds the model (a
 #: ``# model:`` line of JSON); version 2 files, without it, still load, with no model.
@@ -55,7 +58,7 @@ PLAN_COLUMNS = (
 _FIELDS = ("s", "x", "y", "psi", "kappa", "vx", "vy", "r", "ax", "delta", "t")
 
 
-def options_to_dict(options: Any) -> dict[str, Any]:
+def options_to_dict(options: ModelOptions | Mapping[str, bool] | None) -> dict[str, bool]:
     """Model options as a plain dict (for metadata and JSON); ``None`` -> empty dict."""
     if options is None:
         return {}
@@ -73,17 +76,17 @@ class TrajectoryState:
     Attributes have the meaning and units of the :class:`Trajectory` fields of the same name.
     """
 
-    s: Any
-    x: Any
-    y: Any
-    psi: Any
-    kappa: Any
-    vx: Any
-    vy: Any
-    r: Any
-    ax: Any
-    delta: Any
-    t: Any
+    s: float | np.ndarray
+    x: float | np.ndarray
+    y: float | np.ndarray
+    psi: float | np.ndarray
+    kappa: float | np.ndarray
+    vx: float | np.ndarray
+    vy: float | np.ndarray
+    r: float | np.ndarray
+    ax: float | np.ndarray
+    delta: float | np.ndarray
+    t: float | np.ndarray
 
 
 @dataclass(frozen=True, eq=False)
@@ -187,7 +190,7 @@ class Trajectory:
             object.__setattr__(self, "planned_lap_time", float(self.t[-1] + gap / v_end))
 
     @property
-    def model_options(self) -> dict[str, Any]:
+    def model_options(self) -> dict[str, bool]:
         """The model effects planned with, as a dict (empty when the model is unknown)."""
         return {} if self.model is None else options_to_dict(self.model.options)
 
@@ -200,10 +203,8 @@ class Trajectory:
 
     # ------------------------------------------------------------------ geometry
     @cached_property
-    def path(self):
+    def path(self) -> Path:
         """The line as a closed :class:`racing_lib.geometry.Path` (built from x, y)."""
-        from racing_lib.geometry import Path
-
         try:
             return Path(self.x, self.y)
         except RacingLibError as exc:
@@ -289,7 +290,7 @@ class Trajectory:
         )
 
     # ------------------------------------------------------------------ files
-    def metadata(self) -> dict[str, Any]:
+    def metadata(self) -> dict[str, str | int]:
         """The metadata written in a plan file's header (the checksum line excluded)."""
         return {
             "format_version": PLAN_FORMAT_VERSION,
@@ -326,7 +327,7 @@ class Trajectory:
         atomic_write_text(path, text + f"# sha256: {_plan_digest(text)}\n")
 
     @classmethod
-    def load_csv(cls, path: str | os.PathLike[str], track: Any = None) -> Trajectory:
+    def load_csv(cls, path: str | os.PathLike[str], track: Track | None = None) -> Trajectory:
         """Read a plan CSV written by :meth:`save_csv`, refusing any that is not intact.
 
         The checksum (which covers the header, the line length and every number) and the node
@@ -419,10 +420,10 @@ class Trajectory:
         delta: ArrayLike,
         dt: ArrayLike,
         *,
-        track: Any = None,
+        track: Track | None = None,
         method: str = "",
         model: CarModel | None = None,
-        info: dict[str, Any] | None = None,
+        info: Mapping[str, object] | None = None,
     ) -> Trajectory:
         """Build a trajectory from positions, states and the time of each interval.
 
@@ -430,8 +431,6 @@ class Trajectory:
         the time from node k to node k+1 (the last one closes the lap), s. ``model`` is the model
         the states were planned with.
         """
-        from racing_lib.geometry import Path
-
         x = np.asarray(x, float)
         y = np.asarray(y, float)
         dt = np.asarray(dt, float)
@@ -474,10 +473,10 @@ class Trajectory:
     @classmethod
     def from_centerline(
         cls,
-        track: Any,
+        track: Track,
         params: ModelParams,
-        pedal_map: Any = None,
-        options: Any = None,
+        pedal_map: PedalMap | AccelLimits | None = None,
+        options: ModelOptions | None = None,
         spacing: float = 3.0,
         v_top: float | None = None,
     ) -> Trajectory:
@@ -513,13 +512,13 @@ class Trajectory:
     @classmethod
     def at_speed_profile(
         cls,
-        track: Any,
-        path: Any,
+        track: Track,
+        path: Path,
         s: np.ndarray,
         theta: np.ndarray,
         params: ModelParams,
-        pedal_map: Any,
-        options: Any,
+        pedal_map: PedalMap | AccelLimits | None,
+        options: ModelOptions | None,
         v_top: float | None,
         method: str,
     ) -> Trajectory:
@@ -570,8 +569,11 @@ class Trajectory:
 
 
 def model_inputs(
-    params: ModelParams | None, pedal_map: Any, options: Any, who: str
-) -> tuple[ModelParams, Any, Any]:
+    params: ModelParams | None,
+    pedal_map: PedalMap | AccelLimits | None,
+    options: ModelOptions | None,
+    who: str,
+) -> tuple[ModelParams, PedalMap | AccelLimits, ModelOptions]:
     """The planners' model inputs, checked: ``params`` is required, the rest defaults.
 
     No planner picks a model of its own (the default is decided once, by
@@ -583,8 +585,6 @@ def model_inputs(
     PlanningError
         ``params`` is missing (``who`` names the planner in the message).
     """
-    from racing_lib.model import ModelOptions
-
     if params is None:
         raise PlanningError(
             f"{who} needs the model's parameters (a racing_lib.model.ModelParams): pass params, "
@@ -611,14 +611,12 @@ def _model_from_meta(text: str | None, where: str, replan: str) -> CarModel | No
         ) from None
 
 
-def _node_arc_length(path: Any, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+def _node_arc_length(path: Path, x: np.ndarray, y: np.ndarray) -> np.ndarray:
     """Arc length of the nodes (x, y) along ``path`` (a Path through them), m, starting at 0."""
     nodes = getattr(path, "s_nodes", None)
     if nodes is not None and len(nodes) == len(x):
         s = np.asarray(nodes, float)
         return s - s[0]
-    from racing_lib.geometry.path import chord_arc_length
-
     return chord_arc_length(x, y, float(path.length))
 
 

@@ -158,8 +158,6 @@ def crucial_corners(track: Track | str) -> tuple[Corner, ...]:
         Empty for tracks that define none (CSV tracks).
     """
     if isinstance(track, str):
-        from racing_lib.tracks import load_track
-
         track = load_track(track)
     return track.corners
 
@@ -185,8 +183,6 @@ def circle_track(
     width : float
         Total width, m, split equally.
     """
-    from racing_lib.errors import TrackError
-
     if not (radius > 0 and width > 0 and width < 2 * radius):
         raise TrackError(
             f"circle_track needs radius > 0 and 0 < width < 2 radius, got {radius}, {width}."

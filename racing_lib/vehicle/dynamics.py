@@ -15,18 +15,24 @@ still written once.
 from __future__ import annotations
 
 import functools
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from enum import IntEnum
-from typing import Any
+from typing import TYPE_CHECKING
 
 from racing_lib.vehicle.forces import (
     CASADI_OPS,
     MATH_OPS,
+    MathOps,
+    Numeric,
     drag_force,
     slip_angles,
     wheel_loads,
 )
 from racing_lib.vehicle.params import VehicleParams
+
+if TYPE_CHECKING:
+    # casadi is imported where a Function is built: the simulator's float path never needs it
+    import casadi as ca
 
 __all__ = [
     "N_STATE",
@@ -58,16 +64,16 @@ _PSI, _VX, _VY, _R, _DELTA = (int(SimState[n]) for n in ("PSI", "VX", "VY", "R",
 
 def tyre_limits(
     p: VehicleParams,
-    fz: Any,
+    fz: Numeric,
     fz_static: float,
-    mu: Any,
+    mu: Numeric,
     b: float,
     c: float,
     d: float,
-    alpha: Any,
-    ops: Any,
-    floor_max: Callable[[Any, float], Any] | None = None,
-) -> tuple[Any, Any, Any, Any]:
+    alpha: Numeric,
+    ops: MathOps,
+    floor_max: Callable[[Numeric, float], Numeric] | None = None,
+) -> tuple[Numeric, Numeric, Numeric, Numeric]:
     """Force limits of one wheel: the simulated car's tyre law (floats, arrays or CasADi).
 
     Parameters
@@ -104,16 +110,16 @@ def tyre_limits(
 
 
 def car_vector_field(
-    state: Any,
-    delta_cmd: Any,
-    f_drive: Any,
-    f_brake: Any,
-    theta: Any,
-    mu_wheels: tuple[Any, Any, Any, Any],
-    a_transfer: tuple[Any, Any],
+    state: Sequence[Numeric],
+    delta_cmd: Numeric,
+    f_drive: Numeric,
+    f_brake: Numeric,
+    theta: Numeric,
+    mu_wheels: tuple[Numeric, Numeric, Numeric, Numeric],
+    a_transfer: tuple[Numeric, Numeric],
     p: VehicleParams,
-    ops: Any = MATH_OPS,
-) -> tuple[tuple[Any, ...], tuple[Any, Any]]:
+    ops: MathOps = MATH_OPS,
+) -> tuple[tuple[Numeric, ...], tuple[Numeric, Numeric]]:
     """Continuous-time dynamics of the simulated car (the smooth part).
 
     Works with floats (``ops=MATH_OPS``, the simulator's fast path) and with CasADi symbols
@@ -169,8 +175,15 @@ def car_vector_field(
     fzs_f, fzs_r = w_half * p.l_r, w_half * p.l_f  # static wheel loads on flat ground, N
 
     def wheel(
-        fz: Any, fz_static: float, mu: Any, b: float, c: float, d: float, alpha: Any, fx_cmd: Any
-    ) -> tuple[Any, Any]:
+        fz: Numeric,
+        fz_static: float,
+        mu: Numeric,
+        b: float,
+        c: float,
+        d: float,
+        alpha: Numeric,
+        fx_cmd: Numeric,
+    ) -> tuple[Numeric, Numeric]:
         # The longitudinal force is limited by the peak, traction control and ABS; the lateral
         # force gets what is left of the friction ellipse.
         f_peak, shape, f_drive_max, f_brake_max = tyre_limits(
@@ -227,7 +240,7 @@ RK4_OUT = {"state": (0, N_STATE), "a_ground": (7, 2), "d_vx_vy": (9, 2)}
 
 
 @functools.lru_cache(maxsize=16)
-def rk4_substep_function(p: VehicleParams) -> Any:
+def rk4_substep_function(p: VehicleParams) -> ca.Function:
     """One classical RK4 substep of :func:`car_vector_field` as a CasADi Function.
 
     The loads are frozen over the substep (the input ``a_transfer``), as in the simulator.
@@ -244,11 +257,11 @@ def rk4_substep_function(p: VehicleParams) -> Any:
         ``z (18) -> out (11)``, laid out as :data:`RK4_IN` and :data:`RK4_OUT` (SI units as in
         :func:`car_vector_field`; ``h`` in s).
     """
-    import casadi as ca
+    import casadi as ca  # imported here: the simulator's float path never needs casadi
 
     z = ca.SX.sym("z", RK4_IN["h"][0] + 1)
 
-    def part(name: str) -> list[Any]:
+    def part(name: str) -> list[ca.SX]:
         first, length = RK4_IN[name]
         return [z[first + i] for i in range(length)]
 
@@ -257,7 +270,7 @@ def rk4_substep_function(p: VehicleParams) -> Any:
     (theta,), (h,) = part("theta"), part("h")
     mu_w, a_tr = tuple(part("mu_wheels")), tuple(part("a_transfer"))
 
-    def field(y: list[Any]) -> tuple[tuple[Any, ...], tuple[Any, Any]]:
+    def field(y: list[ca.SX]) -> tuple[tuple[Numeric, ...], tuple[Numeric, Numeric]]:
         return car_vector_field(y, delta_cmd, f_drive, f_brake, theta, mu_w, a_tr, p, CASADI_OPS)
 
     k1, _ = field(y0)

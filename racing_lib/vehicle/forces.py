@@ -10,17 +10,24 @@ from __future__ import annotations
 
 import bisect
 import math
+from collections.abc import Callable
 from types import SimpleNamespace
-from typing import Any
+from typing import TYPE_CHECKING, Any, Protocol, TypeAlias
 
 import numpy as np
 
 from racing_lib.vehicle.params import G, VehicleParams
 
+if TYPE_CHECKING:
+    # casadi is imported lazily (see _casadi_ops): the simulator's fast path never needs it
+    import casadi as ca
+
 __all__ = [
     "CASADI_OPS",
     "MATH_OPS",
     "NUMPY_OPS",
+    "MathOps",
+    "Numeric",
     "axle_cornering_stiffness",
     "drag_force",
     "drive_force",
@@ -37,6 +44,31 @@ __all__ = [
     "static_axle_loads",
     "wheel_loads",
 ]
+
+Numeric: TypeAlias = "float | np.ndarray | ca.SX | ca.MX | ca.DM"
+"""A number the force laws and the model equations accept: a float, a NumPy array or a CasADi
+expression (SX, MX, DM); a function typed with it returns the kind it was given (:func:`ops_for`
+picks the backend). A string, so that casadi is imported only where a formula meets a symbol."""
+
+
+class MathOps(Protocol):
+    """A math backend: :data:`MATH_OPS`, :data:`NUMPY_OPS` or :data:`CASADI_OPS`.
+
+    The element-wise functions the formulas call, named as in CasADi (:func:`ops_for` picks one);
+    the ``casadi`` module itself is one too.
+    """
+
+    sin: Callable[[Numeric], Numeric]
+    cos: Callable[[Numeric], Numeric]
+    tan: Callable[[Numeric], Numeric]
+    atan: Callable[[Numeric], Numeric]
+    sqrt: Callable[[Numeric], Numeric]
+    tanh: Callable[[Numeric], Numeric]
+    fabs: Callable[[Numeric], Numeric]
+    fmin: Callable[[Numeric, Numeric], Numeric]
+    fmax: Callable[[Numeric, Numeric], Numeric]
+
+
 # ---------------------------------------------------------------------------------------------
 # Math backends: the same formula runs on floats (math), arrays (numpy) and symbols (casadi).
 # ---------------------------------------------------------------------------------------------
@@ -78,7 +110,7 @@ CASADI_OPS = _LazyCasadiOps()
 """CasADi backend (SX, MX, DM); use for symbolic models."""
 
 
-def ops_for(*args: Any) -> Any:
+def ops_for(*args: Numeric) -> MathOps:
     """Pick the math backend from the argument types.
 
     Any CasADi object (SX, MX, DM) -> casadi; any NumPy array -> numpy; otherwise math (floats).
@@ -97,7 +129,9 @@ def ops_for(*args: Any) -> Any:
 # ---------------------------------------------------------------------------------------------
 
 
-def pacejka_lateral(alpha: Any, F_z: Any, mu: Any, B: Any, C: Any, D: Any) -> Any:
+def pacejka_lateral(
+    alpha: Numeric, F_z: Numeric, mu: Numeric, B: Numeric, C: Numeric, D: Numeric
+) -> Numeric:
     """Simplified Pacejka magic formula F_y = mu F_z D sin(C atan(B alpha)) (paper Eq. 9-10).
 
     Parameters
@@ -120,7 +154,7 @@ def axle_cornering_stiffness(F_z: float, mu: float, B: float, C: float, D: float
     return mu * F_z * D * B * C
 
 
-def drag_force(v_x: Any, C_xw: float, ops: Any = None) -> Any:
+def drag_force(v_x: Numeric, C_xw: float, ops: MathOps | None = None) -> Numeric:
     """Aerodynamic drag F_xw = C_xw v_x^2 (paper Eq. 7), N, acting against the motion.
 
     ``ops`` is the math backend (default: picked from ``v_x``, see :func:`ops_for`).
@@ -130,8 +164,15 @@ def drag_force(v_x: Any, C_xw: float, ops: Any = None) -> Any:
 
 
 def slip_angles(
-    v_x: Any, v_y: Any, r: Any, delta: Any, l_f: float, l_r: float, ops: Any, small_angle: bool
-) -> tuple[Any, Any]:
+    v_x: Numeric,
+    v_y: Numeric,
+    r: Numeric,
+    delta: Numeric,
+    l_f: float,
+    l_r: float,
+    ops: MathOps,
+    small_angle: bool,
+) -> tuple[Numeric, Numeric]:
     """Front and rear slip angles (paper Eq. 11), rad.
 
     ``alpha_f = delta - atan((v_y + l_f r) / v_x)`` and ``alpha_r = -atan((v_y - l_r r) / v_x)``;
@@ -144,7 +185,7 @@ def slip_angles(
     return delta - ops.atan((v_y + l_f * r) / v_x), -ops.atan((v_y - l_r * r) / v_x)
 
 
-def rolling_resistance(F_z: Any, c_rr: float) -> Any:
+def rolling_resistance(F_z: Numeric, c_rr: float) -> Numeric:
     """Rolling resistance R_x = c_rr F_z, N (magnitude; it acts against the motion)."""
     return c_rr * F_z
 
@@ -154,10 +195,10 @@ def static_axle_loads(
     l_f: float,
     l_r: float,
     g: float = G,
-    theta: Any = 0.0,
-    a_z: Any = 0.0,
-    ops: Any = None,
-) -> tuple[Any, Any]:
+    theta: Numeric = 0.0,
+    a_z: Numeric = 0.0,
+    ops: MathOps | None = None,
+) -> tuple[Numeric, Numeric]:
     """Axle loads without load transfer, m (g cos(theta) + a_z) l_{r,f} / (l_f + l_r) (Eq. 11-12).
 
     Returns
@@ -169,7 +210,9 @@ def static_axle_loads(
     return w * l_r, w * l_f
 
 
-def longitudinal_load_transfer(m: float, a_x: Any, h_c: float, l_f: float, l_r: float) -> Any:
+def longitudinal_load_transfer(
+    m: float, a_x: Numeric, h_c: float, l_f: float, l_r: float
+) -> Numeric:
     """Longitudinal load transfer Delta W = m a_x h_c / (l_f + l_r) (paper Eq. 11), N.
 
     Positive `a_x` (accelerating) moves load from the front to the rear axle.
@@ -178,8 +221,8 @@ def longitudinal_load_transfer(m: float, a_x: Any, h_c: float, l_f: float, l_r: 
 
 
 def lateral_load_transfer(
-    m: float, a_y: Any, h_c: float, l_t: float, l_f: float, l_r: float
-) -> tuple[Any, Any]:
+    m: float, a_y: Numeric, h_c: float, l_t: float, l_f: float, l_r: float
+) -> tuple[Numeric, Numeric]:
     """Lateral load transfer per axle (paper Eq. 13, Appendix A), N.
 
     Delta W_F = m a_y h_c / l_t * l_r / L and Delta W_R = m a_y h_c / l_t * l_f / L, L = l_f + l_r:
@@ -198,8 +241,8 @@ def lateral_load_transfer(
 
 
 def wheel_loads(
-    p: VehicleParams, a_x: Any, a_y: Any, theta: Any = 0.0, ops: Any = None
-) -> tuple[Any, Any, Any, Any]:
+    p: VehicleParams, a_x: Numeric, a_y: Numeric, theta: Numeric = 0.0, ops: MathOps | None = None
+) -> tuple[Numeric, Numeric, Numeric, Numeric]:
     """Vertical loads of the four wheels with longitudinal and lateral load transfer, N.
 
     Each wheel carries half its axle's load plus or minus the whole transfer of its axle, so the
@@ -265,7 +308,7 @@ def engine_torque(p: VehicleParams, rpm: float) -> float:
     return min(t, p.power_max / omega)
 
 
-def engine_torque_ops(p: VehicleParams, rpm: Any, ops: Any = None) -> Any:
+def engine_torque_ops(p: VehicleParams, rpm: Numeric, ops: MathOps | None = None) -> Numeric:
     """`engine_torque` for floats, arrays or CasADi symbols.
 
     The piecewise-linear curve is a sum of ramps, T = T_0 + sum_i c_i max(rpm - rpm_i, 0), which
@@ -292,7 +335,7 @@ def drive_force(p: VehicleParams, v_x: float, throttle: float, gear: int) -> flo
     return throttle * engine_torque(p, rpm) * ratio * p.driveline_efficiency / p.r_w
 
 
-def drive_force_envelope(p: VehicleParams, v_x: Any, ops: Any = None) -> Any:
+def drive_force_envelope(p: VehicleParams, v_x: Numeric, ops: MathOps | None = None) -> Numeric:
     """Largest full-throttle drive force over all gears at speed v_x, N (any backend).
 
     The smooth-ish envelope of the gearbox (max over gears), for planners that treat the gear choice
