@@ -223,8 +223,13 @@ class PedalMap:
                 raise ModelError(f"symbolic xi must have {NX} rows; got {xi.size1()}.")
             return self.m_0 + ca.mtimes(ca.DM(self.m_xi).T, xi)
         xi = state_rows(xi)
-        out = self.m_0 + xi @ np.asarray(self.m_xi)
-        return out
+        # A sum over the six states in a fixed order, not a matrix product: a BLAS kernel adds the
+        # products in an order of its own, which on some processors (AVX-512) differs between one
+        # row and many, and the controller's one-value pedal must equal the array path to the bit.
+        acc = xi[:, 0] * self.m_xi[0]
+        for j in range(1, NX):
+            acc = acc + xi[:, j] * self.m_xi[j]
+        return self.m_0 + acc
 
     def throttle_gain(self, v_x: Numeric) -> Numeric:
         """Acceleration added by full throttle at speed ``v_x`` (m/s), m/s^2.
@@ -326,8 +331,13 @@ class PedalMap:
         if scalar:
             # The controller's case, once a step: the same IEEE arithmetic on Python floats costs
             # a quarter of numpy's on one-element arrays.
-            excess = float(a_x) - float(self._base(xi)[0])
-            gain = self.throttle_gain(float(state_rows(xi)[0, X.VX]))
+            row = state_rows(xi)[0].tolist()
+            # _base's sum, in the same order, on Python floats.
+            acc = row[0] * self.m_xi[0]
+            for j in range(1, NX):
+                acc = acc + row[j] * self.m_xi[j]
+            excess = float(a_x) - (self.m_0 + acc)
+            gain = self.throttle_gain(row[X.VX])
             if gain > 0.0:  # else an infinite (or NaN) speed: Python floats raise on x / 0
                 return self._invert(excess, gain, _select, min, max)
         excess = np.asarray(a_x, dtype=float) - self._base(xi)
