@@ -9,12 +9,8 @@ import pytest
 
 from racing_lib.errors import PlanningError
 from racing_lib.model import CarModel, ModelOptions, ModelParams
-from racing_lib.planning.trajectory import (
-    PLAN_COLUMNS,
-    PLAN_FORMAT_VERSION,
-    Trajectory,
-    _plan_digest,
-)
+from racing_lib.planning.plan_file import PLAN_COLUMNS, PLAN_FORMAT_VERSION, plan_digest
+from racing_lib.planning.trajectory import Trajectory
 from racing_lib.tracks import circle_track
 
 G = 9.81
@@ -112,7 +108,7 @@ def test_a_plan_file_of_the_previous_format_loads_without_a_model(tmp_path, circ
     ]
     text = "\n".join(body)
     old = tmp_path / "v2.csv"
-    old.write_text(text + f"\n# sha256: {_plan_digest(text)}\n")
+    old.write_text(text + f"\n# sha256: {plan_digest(text)}\n")
     back = Trajectory.load_csv(old)
     assert back.model is None and back.model_options == {}
     np.testing.assert_array_equal(back.vx, Trajectory.load_csv(path).vx)
