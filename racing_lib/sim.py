@@ -145,7 +145,7 @@ class SimulatedCar:
         self._tracker = FrenetTracker(track.centerline)
         self._rk4_fn = BufferedFunction(_substep_function(p, bool(jit)))
         self._tables = TrackTables(track)
-        # The edge checks: body corners (walls, racing_lib.vehicle.contact) and wheels (open tracks).
+        # The edge checks (racing_lib.vehicle.contact): body corners (walls), wheels (open edges).
         self._wall = WallContact(
             p.m, p.I_zz, p.l_f + p.overhang_front, -(p.l_r + p.overhang_rear), p.width,
             p.wall_mu, p.wall_entry_keep, p.wall_release_gap,
