@@ -33,6 +33,11 @@ Classical RK4 with the commands held over the control period ``dt``. The stiffes
 wheel spin (rate about ``R_w^2 K_x / (I_y_w v)``, several hundred per second at racing speeds,
 tens of thousands near standstill), so the number of substeps is chosen per control step from that
 bound at the lowest speed the step can reach, keeping ``|lambda h| <= 2`` (RK4 is stable to 2.78).
+The package forbids negative wheel spin by clamping the state it is handed
+(``vehicle_dynamics_std`` sets ``x[7] = max(0, x[7])`` in the caller's array, and its wheel
+derivative is zero for a negative wheel speed); the integrator does the same after every substep,
+``omega = max(0, omega)``. Without it a wheel that a hard brake locks overshoots below zero and
+stays there, locked for good, since its derivative is then zero.
 After every quarter of the period (0.025 s at ``dt = 0.1``) the car meets the track:
 :class:`racing_lib.vehicle.contact.WallContact` on walled tracks (the simulated car's plastic
 impact, counted with its duration; the wheel speeds are scaled with the car's speed, so the impact
@@ -202,6 +207,11 @@ def _rk4(field: Any, x: list[Any], h: Any, *args: Any) -> list[Any]:
     ]
 
 
+def _clamp_wheels(x: list[Any], fmax: Any) -> list[Any]:
+    """The state with the wheel speeds ``x[7]``, ``x[8]`` clamped to >= 0, as the package does."""
+    return [*x[:7], fmax(0.0, x[7]), fmax(0.0, x[8])]
+
+
 _FUNCTIONS: dict[tuple[str, bool], Any] = {}
 
 
@@ -223,7 +233,7 @@ def _build_substep_function(p: Any, jit: bool) -> Any:
     z = ca.SX.sym("z", N_STATE + 4)
     x = [z[i] for i in range(N_STATE)]
     delta_cmd, pedal, tau, h = (z[N_STATE + i] for i in range(4))
-    new = _rk4(_casadi_field, x, h, delta_cmd, pedal, tau, p)
+    new = _clamp_wheels(_rk4(_casadi_field, x, h, delta_cmd, pedal, tau, p), ca.fmax)
     fn = ca.Function("commonroad_std_rk4", [z], [ca.vertcat(*new)])
     if not jit:
         return fn
@@ -470,6 +480,7 @@ class CommonRoadCar:
             x = self._state
             for _ in range(n):
                 x = _rk4(_python_field, x, h, steer, u_p, self.steer_tau, self.params)
+                x = _clamp_wheels(x, max)
         else:
             fn = self._fn
             z, out = fn.inputs[0], fn.outputs[0]
