@@ -40,6 +40,7 @@ from racing_lib.geometry import (
 )
 from racing_lib.interfaces import Observation
 from racing_lib.jit import BufferedFunction, compiled_or_interpreted
+from racing_lib.vehicle.contact import TrackTables, WallContact, wheels_beyond_edge
 from racing_lib.vehicle.dynamics import SimState, rk4_substep_function
 from racing_lib.vehicle.forces import (
     axle_cornering_stiffness,
@@ -147,46 +148,25 @@ class SimulatedCar:
         self._walls = track.boundary == "walls"
         self._tracker = FrenetTracker(track.centerline)
         self._rk4_fn = BufferedFunction(_substep_function(p, bool(jit)))
-        self._build_tables()
-        # Extents used by the edge checks: body corners (walls) and wheels (open tracks).
-        self._body_front = p.l_f + p.overhang_front
-        self._body_rear = -(p.l_r + p.overhang_rear)
+        self._tables = TrackTables(track)
+        # The edge checks (racing_lib.vehicle.contact): body corners (walls), wheels (open edges).
+        self._wall = WallContact(
+            p.m, p.I_zz, p.l_f + p.overhang_front, -(p.l_r + p.overhang_rear), p.width,
+            p.wall_mu, p.wall_entry_keep, p.wall_release_gap,
+        )  # fmt: skip
         self._wheels_xy = ((p.l_f, 0.5 * p.l_t), (p.l_f, -0.5 * p.l_t),
                            (-p.l_r, 0.5 * p.l_t), (-p.l_r, -0.5 * p.l_t))  # fmt: skip
         self.reset()
 
-    # ------------------------------------------------------------------ track tables
-    def _build_tables(self) -> None:
-        """Heading, widths and grade on a ~1 m grid, as Python lists for scalar lookups."""
-        tr = self.track
-        length = tr.length
-        n = max(16, math.ceil(length / 1.0))
-        ds = length / n
-        s = np.arange(n + 1) * ds
-        s[-1] = 0.0  # closure: the last entry repeats s = 0
-        heading = np.unwrap(np.asarray(tr.centerline.heading(s), dtype=float))
-        self._ds = ds
-        self._n_tab = n
-        self._length = length
-        self._tab_heading = heading.tolist()
-        self._tab_wl = np.asarray(tr.width_left(s), dtype=float).tolist()
-        self._tab_wr = np.asarray(tr.width_right(s), dtype=float).tolist()
-        self._tab_grade = np.asarray(tr.grade(s), dtype=float).tolist()
+    @property
+    def wall_contacts(self) -> int:
+        """Wall contact episodes since reset (a car scraping along a wall counts once)."""
+        return self._wall.contacts
 
-    def _lookup(self, s: float) -> tuple[float, float, float, float]:
-        """(heading, width_left, width_right, grade) at s by linear interpolation."""
-        u = (s % self._length) / self._ds
-        i = int(u)
-        if i >= self._n_tab:
-            i = self._n_tab - 1
-        w = u - i
-        h, wl, wr, gr = self._tab_heading, self._tab_wl, self._tab_wr, self._tab_grade
-        return (
-            h[i] + w * (h[i + 1] - h[i]),
-            wl[i] + w * (wl[i + 1] - wl[i]),
-            wr[i] + w * (wr[i + 1] - wr[i]),
-            gr[i] + w * (gr[i + 1] - gr[i]),
-        )
+    @property
+    def wall_contact_time(self) -> float:
+        """Time spent touching a wall since reset, s."""
+        return self._wall.contact_time
 
     # ------------------------------------------------------------------ Plant API
     def reset(self, seed: int | None = None) -> Observation:
@@ -218,11 +198,8 @@ class SimulatedCar:
         self._a_body = (0.0, 0.0)
         self._delta_cmd = 0.0
         self._pedal = 0.0
-        self.wall_contacts = 0
-        self.wall_contact_time = 0.0
+        self._wall.reset()
         self.offtrack_time = 0.0
-        self._in_contact = False  # inside a contact episode (with release hysteresis)
-        self._touching = False
         self._offtrack = False
         self._update_track_position()
         return self._observation()
@@ -343,7 +320,7 @@ class SimulatedCar:
         if not (math.isfinite(x) and math.isfinite(y)):
             self._raise_nonfinite(st)
         s, e_y = self._tracker.project(x, y)
-        heading, wl, wr, grade = self._lookup(s)
+        heading, wl, wr, grade = self._tables.lookup(s)
         e_psi = (psi - heading + math.pi) % _TWO_PI - math.pi
         sp, cp = math.sin(e_psi), math.cos(e_psi)
         self._s, self._e_y, self._e_psi = s, e_y, e_psi
@@ -351,94 +328,16 @@ class SimulatedCar:
         mu = self._mu
         if self._walls:
             self._mu_wheels = (mu, mu, mu, mu)
-            self._walls_check(h, heading, wl, wr, sp, cp)
+            self._e_y = self._wall.check(st, h, e_y, heading, wl, wr, sp, cp)
             return
         # Open track: each wheel beyond the edge runs on the run-off's lower friction.
         mu_off = mu * self.params.offtrack_mu_factor
-        mus = []
-        off = False
-        for lx, ly in self._wheels_xy:
-            e_w = e_y + lx * sp + ly * cp
-            if e_w > wl or e_w < -wr:
-                mus.append(mu_off)
-                off = True
-            else:
-                mus.append(mu)
-        self._mu_wheels = tuple(mus)
+        beyond = wheels_beyond_edge(e_y, sp, cp, wl, wr, self._wheels_xy)
+        off = any(beyond)
+        self._mu_wheels = tuple(mu_off if b else mu for b in beyond)
         self._offtrack = off
         if off:
             self.offtrack_time += h
-
-    def _walls_check(
-        self, h: float, heading: float, wl: float, wr: float, sp: float, cp: float
-    ) -> None:
-        """Keep the body's corners inside the walls; a contact is a plastic impact at the corner.
-
-        The deepest corner is pushed back onto the wall, and an impulse at that corner removes its
-        velocity into the wall (no bounce). The impulse acts at the corner, so it also turns the
-        car (a nose-first hit swings the car parallel to the wall), and wall friction takes
-        tangential speed in proportion to it; the first impact of an episode costs a further share
-        of the speed (`wall_entry_keep`).
-        """
-        p = self.params
-        e_y = self._e_y
-        # Lateral extent of the body corners relative to the centerline (local straight
-        # approximation of the edge, good to millimetres at these corner sizes).
-        front, rear, half_w = self._body_front, self._body_rear, 0.5 * p.width
-        half_wc = half_w * abs(cp)
-        pen_left = e_y + max(front * sp, rear * sp) + half_wc - wl
-        pen_right = -wr - (e_y + min(front * sp, rear * sp) - half_wc)
-        if pen_left <= 0.0 and pen_right <= 0.0:
-            self._touching = False
-            if self._in_contact and min(-pen_left, -pen_right) > p.wall_release_gap:
-                self._in_contact = False
-            return
-        # into = +1: the left wall (along the path normal n, which points left); -1: the right one.
-        if pen_left >= pen_right:
-            depth, into = pen_left, 1.0
-        else:
-            depth, into = pen_right, -1.0
-        # The deepest corner in body coordinates.
-        lx = front if into * sp > 0.0 else rear
-        ly = into * half_w if cp > 0.0 else -into * half_w
-        st = self._state
-        nx, ny = -math.sin(heading), math.cos(heading)
-        st[SimState.X] -= into * depth * nx
-        st[SimState.Y] -= into * depth * ny
-        self._e_y = e_y - into * depth
-        entering = not self._in_contact
-
-        psi, r = st[SimState.PSI], st[SimState.R]
-        c, s = math.cos(psi), math.sin(psi)
-        vx, vy = st[SimState.VX], st[SimState.VY]
-        vwx, vwy = vx * c - vy * s, vx * s + vy * c  # CoG velocity, world frame
-        cx, cy = lx * c - ly * s, lx * s + ly * c  # corner relative to the CoG, world frame
-        ncx, ncy = -into * nx, -into * ny  # contact normal, from the wall into the track
-        tcx, tcy = -ncy, ncx  # contact tangent
-        vcx, vcy = vwx - r * cy, vwy + r * cx  # corner velocity
-        v_n = vcx * ncx + vcy * ncy  # < 0: the corner moves into the wall
-        if v_n < 0.0:
-            inv_m, inv_i = 1.0 / p.m, 1.0 / p.I_zz
-            arm_n = cx * ncy - cy * ncx  # (corner x normal)_z
-            arm_t = cx * tcy - cy * tcx
-            j_n = -v_n / (inv_m + arm_n * arm_n * inv_i)  # plastic: corner's normal speed -> 0
-            v_t = vcx * tcx + vcy * tcy
-            j_t_stop = abs(v_t) / (inv_m + arm_t * arm_t * inv_i)
-            j_t = -math.copysign(min(p.wall_mu * j_n, j_t_stop), v_t)  # Coulomb wall friction
-            vwx += (j_n * ncx + j_t * tcx) * inv_m
-            vwy += (j_n * ncy + j_t * tcy) * inv_m
-            r += (j_n * arm_n + j_t * arm_t) * inv_i
-        if entering:
-            # Impact losses beyond friction (crushing, scrubbing): keep a share of the speed.
-            vwx *= p.wall_entry_keep
-            vwy *= p.wall_entry_keep
-            self.wall_contacts += 1
-            self._in_contact = True
-        st[SimState.VX] = vwx * c + vwy * s
-        st[SimState.VY] = -vwx * s + vwy * c
-        st[SimState.R] = r
-        self._touching = True
-        self.wall_contact_time += h
 
     def _observation(self) -> Observation:
         st = self._state
@@ -484,7 +383,7 @@ class SimulatedCar:
             "F_z": tuple(float(f) for f in f_z),
             "mu_wheels": self._mu_wheels,
             "mu_trial": self._mu,
-            "touching_wall": self._touching,
+            "touching_wall": self._wall.touching,
             "offtrack": self._offtrack,
             "wall_contacts": self.wall_contacts,
             "wall_contact_time": self.wall_contact_time,

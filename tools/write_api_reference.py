@@ -25,6 +25,7 @@ SECTIONS = [
     ("The planning and control model", ["racing_lib.model"]),
     ("What plants and controllers exchange", ["racing_lib.interfaces"]),
     ("The simulated car", ["racing_lib.sim"]),
+    ("Plants nobody here wrote", ["racing_lib.plants"]),
     ("Planning", ["racing_lib.planning"]),
     ("Control", ["racing_lib.control"]),
     ("Experiments: laps, identification, tuning, the paper's tables", ["racing_lib.experiments"]),
