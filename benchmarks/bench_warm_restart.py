@@ -35,7 +35,7 @@ from typing import Any
 import numpy as np
 from _script import argument_parser, run, tracks_to_measure
 
-from racing_lib.planning import GRIP_MARGIN
+from racing_lib.model import identified_model
 from racing_lib.planning.grid import TrackGrid
 from racing_lib.planning.time_optimal import (
     _SCALE,
@@ -46,7 +46,6 @@ from racing_lib.planning.time_optimal import (
     clear_cache,
 )
 from racing_lib.planning.time_optimal_nlp import NXS
-from racing_lib.planning.trajectory import default_model_inputs
 
 #: IPOPT's warm start: take the given multipliers and keep the point where it is.
 WARM_START = (
@@ -139,8 +138,8 @@ def main() -> None:
     parser.add_argument("--only", nargs="*", help="track names to keep")
     args = parser.parse_args()
     warnings.filterwarnings("ignore")
-    params, _, options = default_model_inputs(None, None, None)
-    params = params.replace(mu=params.mu * (1.0 - GRIP_MARGIN))  # as plan() plans
+    model = identified_model()  # what plan() plans with by default
+    params, options = model.planning_params(), model.options
     tracks = tracks_to_measure(args.tracks_dir, args.only)
     ways = ("cold", "restart", "restart-mono", "coarse")
     print(f"{'track':13s}" + "".join(f" | {w + ' it':>15s} {'wall':>5s} {'lap':>8s}" for w in ways))
