@@ -11,8 +11,9 @@ import json
 import os
 import time
 from collections.abc import Iterable, Mapping, Sequence
+from concurrent.futures import Executor
 from pathlib import Path as FilePath
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -29,6 +30,11 @@ from racing_lib.io import atomic_write_json, data_file, jsonable
 from racing_lib.model import CarModel, ModelOptions, identified_model
 from racing_lib.optim.cmaes import TuningResult, TuningSettings
 from racing_lib.planning import PlanResult, Trajectory, plan
+from racing_lib.tracks import figure_eight_track, load_track
+
+if TYPE_CHECKING:
+    # Only named in annotations: dask is an optional dependency (racing-lib[distributed]).
+    from distributed import Client
 
 __all__ = [
     "TUNED_FILE_FORMAT",
@@ -81,7 +87,10 @@ TUNED_WEIGHTS_FILE = "tuned_weights.json"
 
 
 def configuration_name(
-    controller: str, method: str, options: Any = None, smooth_transition: bool = True
+    controller: str,
+    method: str,
+    options: ModelOptions | None = None,
+    smooth_transition: bool = True,
 ) -> str | None:
     """The :data:`TUNING_CONFIGS` entry a lap set-up corresponds to, or None if there is none.
 
@@ -122,7 +131,10 @@ def _start_label(initial: str | Mapping[str, float] | None) -> str:
     return f"tuned '{initial}'" if isinstance(initial, str) else "given weights"
 
 
-def history_summary(history: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
+def history_summary(
+    # Any: TuningResult.history entries, the optimizer's records of mixed values (optim.cmaes).
+    history: Sequence[Mapping[str, Any]],
+) -> list[dict[str, float]]:
     """Condense a tuning history to what is plotted and shipped, one dict per generation.
 
     Parameters
@@ -215,7 +227,11 @@ def config_model(config: str, model: CarModel | None = None) -> CarModel:
 
 
 def config_plan(
-    config: str, track: Track, model: CarModel | None = None, **plan_kwargs: Any
+    config: str,
+    track: Track,
+    model: CarModel | None = None,
+    # Any: forwarded to racing_lib.planning.plan, whose keywords have different types.
+    **plan_kwargs: Any,
 ) -> PlanResult:
     """The plan of a configuration of :data:`TUNING_CONFIGS`: its method and model options.
 
@@ -260,6 +276,7 @@ def config_spec(
     *,
     trajectory: Trajectory | None = None,
     weights: dict[str, float] | None = None,
+    # Any: forwarded to racing_lib.planning.plan, whose keywords have different types.
     **plan_kwargs: Any,
 ) -> LapSpec:
     """The :class:`~racing_lib.experiments.lap.LapSpec` of a configuration.
@@ -298,7 +315,7 @@ def config_spec(
     )
 
 
-def main_tuning_tracks() -> list[Any]:
+def main_tuning_tracks() -> list[Track]:
     """The circuits the shipped weights of ``'main'`` are tuned on, all made by the package.
 
     The expressway (walls, the paper's main track), the shortcut (open, sharper corners) and a
@@ -306,18 +323,16 @@ def main_tuning_tracks() -> list[Any]:
     the three are not tuned to one layout, and every real circuit stays unseen for testing them
     (``benchmarks/bench_circuits.py``).
     """
-    from racing_lib.tracks import figure_eight_track, load_track
-
     return [load_track("expressway"), load_track("shortcut"), figure_eight_track(80.0, 12.0)]
 
 
 def generate_tuned_weights(
     configs: Iterable[str] = ("main",),
     *,
-    track: Any = "expressway",
+    track: str | os.PathLike[str] | Track | Sequence[str | os.PathLike[str] | Track] = "expressway",
     seeds: int | Iterable[int] = (0,),
     settings: TuningSettings | None = None,
-    executor: Any = None,
+    executor: Executor | Client | None = None,
     workers: int | None = None,
     out: str | os.PathLike[str] | None = None,
     work_dir: str | os.PathLike[str] | None = None,
@@ -333,7 +348,7 @@ def generate_tuned_weights(
     ----------
     configs : iterable of str
         Names of :data:`TUNING_CONFIGS`.
-    track : str, Track or sequence of them
+    track : str, path, Track or sequence of them
         The track tuned on (the paper tunes on its main track), or several (names, CSV files,
         Tracks): the objective is then their mean, for weights that carry over to other circuits.
     seeds : int or iterable of int
@@ -354,9 +369,6 @@ def generate_tuned_weights(
         configuration (its name, e.g. ``'main'``: the ablations start from the main result, so a
         shorter budget suffices), or explicit weights.
     """
-    from racing_lib.geometry import Track
-    from racing_lib.tracks import load_track
-
     start = tuned_weights(initial) if isinstance(initial, str) else initial
     if isinstance(initial, str) and start is None:
         raise ControlError(

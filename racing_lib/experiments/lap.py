@@ -24,6 +24,7 @@ from typing import Any, Protocol, TypeVar
 
 import numpy as np
 
+from racing_lib.control import build_controller
 from racing_lib.errors import ModelError, PlantError
 from racing_lib.geometry import (
     FrenetTracker,
@@ -38,6 +39,7 @@ from racing_lib.interfaces import (
 from racing_lib.model import CarModel
 from racing_lib.model.drive import DRIVE_COLUMNS, Drive
 from racing_lib.planning import Trajectory
+from racing_lib.sim import SimulatedCar
 from racing_lib.vehicle import VehicleParams
 
 #: The lap's columns beyond those of every drive, one entry per control step.
@@ -94,7 +96,7 @@ class LapMetrics:
     solve_time_ms_p99: float
     controller_stats: dict[str, float] = field(default_factory=dict)
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> dict[str, int | float | dict[str, float] | None]:
         """A JSON-ready dict (NaN becomes None)."""
         out = asdict(self)
         return {
@@ -433,7 +435,7 @@ class LapSpec:
 class _StartOnPlan:
     """A simulated car whose reset puts it on the plan ``run_up`` before the line (flying start)."""
 
-    def __init__(self, car, pose: tuple[float, float, float, float]) -> None:
+    def __init__(self, car: SimulatedCar, pose: tuple[float, float, float, float]) -> None:
         self._car = car
         self._pose = pose
         self.dt = car.dt
@@ -451,10 +453,8 @@ class _StartOnPlan:
         return getattr(self._car, name)
 
 
-def make_car(spec: LapSpec):
+def make_car(spec: LapSpec) -> Plant:
     """The simulated car of ``spec``, starting ``spec.run_up`` m before the line, on the plan."""
-    from racing_lib.sim import SimulatedCar
-
     traj = spec.trajectory
     s0 = (traj.path.length - spec.run_up) % traj.path.length
     x0, y0 = traj.path.position(s0)
@@ -466,8 +466,6 @@ def make_car(spec: LapSpec):
 
 def make_controller(spec: LapSpec) -> Controller:
     """The controller named in ``spec``, built for its trajectory."""
-    from racing_lib.control import build_controller
-
     return build_controller(
         spec.controller,
         spec.trajectory,

@@ -63,6 +63,10 @@ from racing_lib.tracks import load_track
 
 #: Values of ``race(weights=...)`` that name a choice rather than give the weights.
 WEIGHT_CHOICES = ("tuned", "default")
+#: What ``racing-lib lap --json`` prints (:meth:`RaceResult.summary`): track, controller, planned
+#: lap time, one dict of lap metrics per trial and their summary; a JSON object of numbers,
+#: strings, None and nested objects, hence ``Any``.
+LapSummary = dict[str, Any]
 
 
 @dataclass
@@ -139,12 +143,12 @@ class RaceResult:
         return 100.0 * (float(stats["lap_time_mean_s"]) / self.planned_lap_time - 1.0)
 
     # -- reports ---------------------------------------------------------------------------------
-    def summary(self) -> dict[str, Any]:
+    def summary(self) -> LapSummary:
         """The fields of ``racing-lib lap --json``.
 
         Returns
         -------
-        dict
+        LapSummary
             ``track``, ``controller``, ``planned_lap_time_s`` (of the reference tracked, s),
             ``trials`` (one dict of :class:`~racing_lib.experiments.lap.LapMetrics` fields per lap,
             without the controller's counters) and ``summary`` (lap-time mean, std and best over
@@ -342,6 +346,7 @@ def race(
     model: CarModel | None = None,
     smooth_transition: bool = True,
     reference: Trajectory | str | os.PathLike[str] | None = None,
+    # Any: passed on to racing_lib.planning.plan, whose keywords have different types.
     plan_kwargs: Mapping[str, Any] | None = None,
     progress: bool = False,
     report: Callable[[str], None] | None = None,
@@ -482,4 +487,4 @@ class ModelMismatchWarning(UserWarning):
     """A plan is driven by a controller that predicts with other model effects."""
 
 
-__all__ = ["WEIGHT_CHOICES", "ModelMismatchWarning", "RaceResult", "race"]
+__all__ = ["WEIGHT_CHOICES", "LapSummary", "ModelMismatchWarning", "RaceResult", "race"]

@@ -30,15 +30,32 @@ then the tuning, which drives hundreds of closed-loop laps (minutes, so skipped 
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import os
-from collections.abc import Callable, Iterable, Mapping
-from typing import Any
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from concurrent.futures import Executor
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from racing_lib.control.mpc import MPCSettings
+from racing_lib.control.nominal import NominalController, NominalSettings
 from racing_lib.errors import ControlError, RacingLibError
+from racing_lib.experiments.lap import (
+    LapLog,
+    LapMetrics,
+    LapSpec,
+    make_car,
+    make_controller,
+    run_lap,
+)
+from racing_lib.interfaces import Controller
 from racing_lib.optim.cmaes import SearchSpace, TuningResult, TuningSettings, tune
+
+if TYPE_CHECKING:
+    # Only named in annotations: dask is an optional dependency (racing-lib[distributed]).
+    from distributed import Client
 
 __all__ = [
     "FAILED_EVALUATION",
@@ -92,8 +109,8 @@ def _progress(s_track: np.ndarray, track_length: float | None) -> np.ndarray:
 
 
 def tuning_objective(
-    log: Any,
-    metrics: Any,
+    log: LapLog,
+    metrics: LapMetrics,
     w_t: float = W_T,
     w_s: float = W_S,
     *,
@@ -192,7 +209,7 @@ def seed_tuple(seeds: int | Iterable[int] | None) -> tuple[int | None, ...]:
 
 
 def evaluate_weights(
-    spec: Any,
+    spec: LapSpec | Sequence[LapSpec],
     weights: Mapping[str, float],
     seeds: int | Iterable[int] | None = (0,),
     *,
@@ -229,8 +246,6 @@ def evaluate_weights(
         The controller cannot be built (unknown name, a weight that is not a field of
         ``MPCSettings``, a negative weight).
     """
-    from racing_lib.experiments.lap import make_controller
-
     if isinstance(spec, (list, tuple)):
         return float(np.mean([evaluate_weights(one, weights, seeds, w_t=w_t, w_s=w_s)
                               for one in spec]))  # fmt: skip
@@ -240,17 +255,16 @@ def evaluate_weights(
 
 
 def _mean_objective(
-    spec: Any, build_controller: Callable[[], Any], seeds: Any, w_t: float, w_s: float
+    spec: LapSpec,
+    build_controller: Callable[[], Controller],
+    seeds: int | Iterable[int] | None,
+    w_t: float,
+    w_s: float,
 ) -> float:
     """Mean tuning objective over seeded laps of ``spec``, one new controller per lap.
 
     A lap whose simulation raises a RacingLibError scores :data:`FAILED_EVALUATION`.
     """
-    from racing_lib.experiments.lap import (
-        make_car,
-        run_lap,
-    )
-
     length = float(spec.track.length)
     values = []
     for seed in seed_tuple(seeds):
@@ -277,7 +291,7 @@ def _check_fields(values: Mapping[str, float], settings_class: type) -> None:
 
 
 def evaluate_nominal_gains(
-    spec: Any,
+    spec: LapSpec,
     gains: Mapping[str, float],
     seeds: int | Iterable[int] | None = (0,),
     *,
@@ -289,8 +303,6 @@ def evaluate_nominal_gains(
     ``gains`` are fields of :class:`~racing_lib.control.nominal.NominalSettings` (for example
     ``lookahead_time``, ``kp``); the others keep their defaults. ``spec.controller`` is ignored.
     """
-    from racing_lib.control.nominal import NominalController, NominalSettings
-
     _check_fields(gains, NominalSettings)
     settings = NominalSettings(**{k: float(v) for k, v in gains.items()})
     return _mean_objective(
@@ -301,15 +313,6 @@ def evaluate_nominal_gains(
 #: The six MPC weights the paper tunes, by their ``MPCSettings`` field names: v_x, v_y, yaw rate,
 #: heading error, lateral error, steering rate.
 MPC_WEIGHT_NAMES = ("w_vx", "w_vy", "w_r", "w_epsi", "w_ey", "w_ddelta")
-#: Starting values if ``racing_lib.control.mpc`` cannot be imported (its defaults otherwise).
-_FALLBACK_MPC_WEIGHTS = {
-    "w_vx": 1.0,
-    "w_vy": 1.0,
-    "w_r": 10.0,
-    "w_epsi": 50.0,
-    "w_ey": 5.0,
-    "w_ddelta": 100.0,
-}
 #: The box for every MPC weight: four decades either side of 1 .. 100; wide enough that CMA-ES
 #: rarely sits on it, narrow enough that no weight dwarfs the others by more than ~1e6 (beyond
 #: which the QP is badly conditioned).
@@ -329,14 +332,8 @@ def mpc_weight_space(
     box : (float, float)
         Lower and upper bound of every weight.
     """
-    start = dict(_FALLBACK_MPC_WEIGHTS)
-    try:
-        from racing_lib.control.mpc import MPCSettings
-
-        defaults = MPCSettings()
-        start = {n: float(getattr(defaults, n)) for n in MPC_WEIGHT_NAMES}
-    except (ImportError, AttributeError):  # the MPC module is optional for the machinery
-        pass
+    defaults = MPCSettings()
+    start = {n: float(getattr(defaults, n)) for n in MPC_WEIGHT_NAMES}
     if initial:
         start.update({k: float(v) for k, v in initial.items()})
     lo, hi = box
@@ -354,8 +351,6 @@ def nominal_gain_space(initial: Mapping[str, float] | None = None) -> SearchSpac
     ``lookahead_min`` (m), ``lookahead_time`` (s) and ``kp`` (pedal per m/s), from the defaults
     of ``NominalSettings`` (or ``initial``), each within a factor 10-30 of its default.
     """
-    from racing_lib.control.nominal import NominalSettings
-
     d = NominalSettings()
     start = {"lookahead_min": d.lookahead_min, "lookahead_time": d.lookahead_time, "kp": d.kp}
     if initial:
@@ -374,7 +369,7 @@ def nominal_gain_space(initial: Mapping[str, float] | None = None) -> SearchSpac
 
 
 def tune_weights(
-    spec: Any,
+    spec: LapSpec | Sequence[LapSpec],
     seeds: int | Iterable[int] = (0,),
     *,
     space: SearchSpace | None = None,
@@ -382,7 +377,7 @@ def tune_weights(
     evaluator: Callable[..., float] = evaluate_weights,
     w_t: float = W_T,
     w_s: float = W_S,
-    executor: Any = None,
+    executor: Executor | Client | None = None,
     workers: int | None = None,
     out_dir: str | os.PathLike[str] | None = None,
     resume: bool = False,
@@ -392,8 +387,9 @@ def tune_weights(
 
     Parameters
     ----------
-    spec : LapSpec
-        Track, plan, controller (``"coupled-mpc"`` or ``"decoupled-mpc"``) and options.
+    spec : LapSpec or sequence of LapSpec
+        Track, plan, controller (``"coupled-mpc"`` or ``"decoupled-mpc"``) and options; several
+        specs are scored together (see :func:`evaluate_weights`).
     seeds : int or iterable of int
         Seeds of the laps each candidate is scored on (the objective is their mean).
     space : SearchSpace, optional
@@ -414,8 +410,6 @@ def tune_weights(
     TuningResult
         ``success`` means the best candidate completed its laps.
     """
-    import functools
-
     f = functools.partial(evaluator, spec, seeds=seed_tuple(seeds), w_t=w_t, w_s=w_s)
     return tune(
         f,
@@ -430,7 +424,12 @@ def tune_weights(
     )
 
 
-def tune_nominal_gains(spec: Any, seeds: int | Iterable[int] = (0,), **kwargs: Any) -> TuningResult:
+def tune_nominal_gains(
+    spec: LapSpec,
+    seeds: int | Iterable[int] = (0,),
+    # Any: forwarded to tune_weights, whose keywords have different types.
+    **kwargs: Any,
+) -> TuningResult:
     """:func:`tune_weights` for the nominal controller's gains (:func:`nominal_gain_space`)."""
     kwargs.setdefault("space", nominal_gain_space())
     return tune_weights(spec, seeds, evaluator=evaluate_nominal_gains, **kwargs)

@@ -18,9 +18,17 @@ from collections.abc import Sequence
 from pathlib import Path as FilePath
 from typing import Any
 
+import numpy as np
+
 from racing_lib.errors import RacingLibError
-from racing_lib.model import CarModel
-from racing_lib.planning import METHODS, STARTS
+from racing_lib.io import atomic_savefig, atomic_write_json, jsonable
+from racing_lib.model import CarModel, ModelOptions, identified_model
+from racing_lib.planning import METHODS, STARTS, TimeOptimalSettings, plan
+
+# The parser needs only the modules above (racing_lib.model and racing_lib.planning give its
+# choices; numpy and racing_lib.io are loaded with them). Each command imports the rest of what it
+# runs in its own body (tracks, experiments, the optimizer, matplotlib), so that
+# `racing-lib --help` and the refusal of bad arguments stay instant.
 
 DEFAULT_TRACK = "expressway"
 
@@ -51,8 +59,7 @@ def _emit_json(obj: dict[str, Any]) -> None:
 
 def cmd_tracks(args: argparse.Namespace) -> int:
     """List the built-in tracks with their length, width range and boundary kind."""
-    import numpy as np
-
+    # Per command: the built-in tracks are not needed for --help (see the note at the top).
     from racing_lib.tracks import (
         builtin_track_names,
         load_track,
@@ -100,8 +107,6 @@ def _model(args: argparse.Namespace) -> CarModel | None:
     None when a plan file is driven and no model flag is given: the plan's own model is then
     used, the one it was made with.
     """
-    from racing_lib.model import ModelOptions, identified_model
-
     options = ModelOptions(
         drag=not args.no_drag,
         longitudinal_weight_transfer=not args.no_weight_transfer,
@@ -120,21 +125,18 @@ def _plan_kwargs(args: argparse.Namespace) -> dict[str, Any]:
     if args.start is not None:
         kwargs["start"] = args.start
     if args.max_iter is not None:
-        from racing_lib.planning import TimeOptimalSettings
-
         kwargs["time_optimal_settings"] = TimeOptimalSettings(max_iter=args.max_iter)
     return kwargs
 
 
 def _make_plan(args: argparse.Namespace, track):
     """Plan ``track`` with the method, model options and knobs on the command line."""
-    from racing_lib.planning import plan
-
     return plan(track, args.method, _model(args), **_plan_kwargs(args))
 
 
 def cmd_plan(args: argparse.Namespace) -> int:
     """Plan a lap and optionally save it as a plan CSV."""
+    # Per command: the built-in tracks are not needed for --help (see the note at the top).
     from racing_lib.tracks import load_track
 
     track = load_track(args.track)
@@ -158,6 +160,7 @@ def cmd_plan(args: argparse.Namespace) -> int:
 
 def cmd_lap(args: argparse.Namespace) -> int:
     """Drive laps in closed loop and report their metrics."""
+    # Per command: the pipeline loads the controllers (scipy.signal, OSQP), a third of a second.
     from racing_lib.experiments.pipeline import race
 
     out_dir = FilePath(args.out) if args.out else None
@@ -215,8 +218,8 @@ def _save_lap_outputs(out_dir: FilePath, track, trajectory, results, report) -> 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    # Only when a lap's figures are saved: plotting loads matplotlib.
     from racing_lib.face import plotting
-    from racing_lib.io import atomic_savefig, atomic_write_json
 
     plotting.set_style()
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -241,9 +244,10 @@ def _save_lap_outputs(out_dir: FilePath, track, trajectory, results, report) -> 
 
 def cmd_tune(args: argparse.Namespace) -> int:
     """Tune the coupled MPC's weights with CMA-ES on the time-optimal plan of a track."""
+    # Per command (see the note at the top): the experiments load the controllers (scipy.signal,
+    # OSQP), a third of a second.
     from racing_lib.experiments.configs import config_spec
     from racing_lib.experiments.tuning import tune_weights
-    from racing_lib.io import atomic_write_json, jsonable
     from racing_lib.optim.cmaes import TuningSettings
     from racing_lib.tracks import load_track
 
@@ -295,6 +299,8 @@ def cmd_ablation(args: argparse.Namespace) -> int:
     Shows the shipped table at once; rows recomputed with ``--recompute`` (or found recomputed in
     the ``--out`` cache folder) replace their shipped versions and are marked as such.
     """
+    # Per command (see the note at the top): the tables load the experiments and the controllers
+    # (scipy.signal, OSQP), a third of a second.
     from racing_lib.experiments import ablation
     from racing_lib.experiments.ablation.check import (
         compare_rows,
@@ -503,6 +509,8 @@ def check_arguments(args: argparse.Namespace) -> None:
         )
     out = getattr(args, "out", None)
     if args.command == "ablation" and getattr(args, "recompute", None) and not out:
+        # Only for this command's check: the runner loads the experiments (a third of a second),
+        # which a refusal of bad arguments must not wait for.
         from racing_lib.experiments.ablation.runner import DEFAULT_OUT
 
         check_output_dir(DEFAULT_OUT, "--out (default)")

@@ -9,14 +9,41 @@ or as an ``(x, y)`` pair.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
+from numpy.typing import ArrayLike
 
 from racing_lib.geometry import Track
+
+if TYPE_CHECKING:
+    # Only named in annotations: importing the experiments (the ablation package, the laps) loads
+    # the controllers, a third of a second that the chapters' figures do not need.
+    from matplotlib.animation import FuncAnimation
+
+    from racing_lib.experiments.ablation.rows import TableRow
+    from racing_lib.experiments.lap import LapLog
+
+
+class XYLine(Protocol):
+    """Anything with ``x`` and ``y`` arrays, m: a Trajectory, a LapLog, a Path."""
+
+    @property
+    def x(self) -> ArrayLike:
+        """The points' x coordinates, m."""
+        ...
+
+    @property
+    def y(self) -> ArrayLike:
+        """The points' y coordinates, m."""
+        ...
+
+
+#: A line to draw: an object with ``x`` and ``y`` arrays, or an ``(x, y)`` pair of arrays, m.
+Line = XYLine | tuple[ArrayLike, ArrayLike]
 
 #: Colours of the recurring lines, so that "plan" looks the same in every chapter.
 COLORS: dict[str, str] = {
@@ -55,7 +82,7 @@ def set_style() -> None:
     )
 
 
-def _xy(line: Any) -> tuple[np.ndarray, np.ndarray]:
+def _xy(line: Line) -> tuple[np.ndarray, np.ndarray]:
     if isinstance(line, tuple | list) and len(line) == 2:
         return np.asarray(line[0], dtype=float), np.asarray(line[1], dtype=float)
     return np.asarray(line.x, dtype=float), np.asarray(line.y, dtype=float)
@@ -83,7 +110,7 @@ def track_edges(track: Track, n: int = 2000) -> tuple[np.ndarray, np.ndarray]:
 
 def plot_track(
     track: Track,
-    lines: Mapping[str, Any] | None = None,
+    lines: Mapping[str, Line] | None = None,
     *,
     ax: Axes | None = None,
     centerline: bool = True,
@@ -96,7 +123,7 @@ def plot_track(
     ----------
     track : Track
         The track; walls are drawn solid, open edges dashed.
-    lines : mapping of label -> line, optional
+    lines : mapping of label -> Line, optional
         Racing lines to draw (objects with ``x``/``y`` or ``(x, y)`` pairs, m).
     ax : Axes, optional
         Where to draw; a new figure when omitted.
@@ -149,7 +176,7 @@ def plot_track(
 def plot_corners(
     track: Track,
     corners: Mapping[int, float],
-    lines: Mapping[str, Any] | None = None,
+    lines: Mapping[str, Line] | None = None,
     *,
     half_width: float = 90.0,
     axes: Sequence[Axes] | None = None,
@@ -162,7 +189,7 @@ def plot_corners(
         The track.
     corners : mapping of number -> s
         Corner numbers and their arc length on the centerline, m.
-    lines : mapping of label -> line, optional
+    lines : mapping of label -> Line, optional
         Lines to draw in every panel.
     half_width : float
         Half the side of each square panel, m.
@@ -248,25 +275,27 @@ def plot_profiles(
 
 
 def plot_row_speeds(
-    ax: Any,
-    row: dict[str, Any],
+    ax: Axes,
+    row: TableRow,
     title: str,
-    base: dict[str, Any] | None = None,
+    base: TableRow | None = None,
     corners: dict[int, float] | None = None,
-) -> Any:
+) -> Axes:
     """v_x over s of one ablation row: its plan and its closed loop, the base row's plan in grey.
 
     Parameters
     ----------
     ax : matplotlib Axes
         Where to draw.
-    row, base : dict
+    row, base : TableRow
         Rows of the ablation table (their ``profile``); ``base`` is drawn as a grey reference.
     title : str
         Title of the panel.
     corners : dict, optional
         Corner number -> arc length, m, marked along the axis.
     """
+    # Here, not at the top: the ablation package loads the experiments and the controllers, a
+    # third of a second that the chapters' other figures do not need.
     from racing_lib.experiments.ablation.paper import row_profile
 
     s = np.asarray(row["profile"]["s_m"], dtype=float)
@@ -288,7 +317,7 @@ def plot_row_speeds(
 
 
 def plot_lap_times(
-    rows: Sequence[Mapping[str, Any]], ax: Axes | None = None, best: float | None = None
+    rows: Sequence[TableRow], ax: Axes | None = None, best: float | None = None
 ) -> Axes:
     """The closed-loop lap times of ablation rows, trial by trial, against each row's plan.
 
@@ -298,7 +327,7 @@ def plot_lap_times(
 
     Parameters
     ----------
-    rows : sequence of dict
+    rows : sequence of TableRow
         Rows of the ablation table (``name``, ``planned_lap_time_s``, ``trial_metrics``).
     ax : Axes, optional
         Where to draw; a new figure when omitted.
@@ -332,13 +361,13 @@ def plot_lap_times(
 
 def lap_animation(
     track: Track,
-    log: Any,
+    log: LapLog,
     *,
     frames: int = 60,
     trail: float = 8.0,
-    plan: Any = None,
+    plan: Line | None = None,
     size: tuple[float, float] = (5.5, 4.0),
-) -> Any:
+) -> FuncAnimation:
     """A short animation of a logged lap on its track: the car, its recent path, its speed.
 
     Kept small for a notebook and the book: ``frames`` frames spread evenly over the lap, a
@@ -354,7 +383,7 @@ def lap_animation(
         Number of frames.
     trail : float
         Length of the trail drawn behind the car, s.
-    plan : line, optional
+    plan : Line, optional
         The planned line, drawn thin beneath.
     size : (float, float)
         Figure size, inches.
@@ -363,7 +392,7 @@ def lap_animation(
     -------
     matplotlib.animation.FuncAnimation
     """
-    from matplotlib.animation import FuncAnimation
+    from matplotlib.animation import FuncAnimation  # 7 ms, for the one function that animates
 
     t, x, y, vx = (np.asarray(getattr(log, k), dtype=float) for k in ("t", "x", "y", "vx"))
     lap = np.flatnonzero(np.asarray(log.in_lap))

@@ -27,6 +27,8 @@ from racing_lib.grading.grader import (
     grade,
     refuse_library,
 )
+from racing_lib.model import Model, X
+from racing_lib.tracks import load_track
 
 __all__ = ["check_frenet_projection", "check_frenet_rates", "check_frenet_to_cartesian"]
 
@@ -35,8 +37,6 @@ _TRACK = "expressway"
 
 @functools.lru_cache(maxsize=1)
 def _track():
-    from racing_lib.tracks import load_track
-
     return load_track(_TRACK)
 
 
@@ -185,8 +185,6 @@ def check_frenet_rates(frenet_rates) -> CheckResult:
     Eq. 2-4, compared with the kinematic rows of
     :meth:`racing_lib.model.Model.xi_dot` (relative 1e-9).
     """
-    from racing_lib.model import Model, X
-
     cases = [
         # v_x, v_y, r, e_psi, e_y, kappa: straight, inside and outside of bends, drifting
         (30.0, 0.0, 0.0, 0.0, 0.0, 0.0),

@@ -26,6 +26,8 @@ from racing_lib.grading.grader import (
     expect_close,
     grade,
 )
+from racing_lib.model import Model, ModelParams
+from racing_lib.vehicle import longitudinal_load_transfer, pacejka_lateral, static_axle_loads
 
 __all__ = [
     "check_axle_loads",
@@ -52,7 +54,6 @@ def check_slip_angles(slip_angles) -> CheckResult:
     Compared with ``alpha_f`` and ``alpha_r`` of :meth:`racing_lib.model.Model.terms` to 1e-5 rad
     (all cases at v_x >= 12 m/s, where the model's standstill guard changes less than that).
     """
-    from racing_lib.model import Model, ModelParams
 
     def body() -> str:
         params = ModelParams()
@@ -85,8 +86,6 @@ def check_tyre_force(tyre_force) -> CheckResult:
     The simplified Pacejka law, compared with :func:`racing_lib.vehicle.pacejka_lateral` (relative
     1e-9), on both sides of the force peak and for negative slip.
     """
-    from racing_lib.model import ModelParams
-    from racing_lib.vehicle import pacejka_lateral
 
     def body() -> str:
         p = ModelParams()
@@ -119,8 +118,6 @@ def check_axle_loads(axle_loads) -> CheckResult:
     compared with :func:`racing_lib.vehicle.static_axle_loads` and
     :func:`racing_lib.vehicle.longitudinal_load_transfer` (to 0.01 N).
     """
-    from racing_lib.model import ModelParams
-    from racing_lib.vehicle import longitudinal_load_transfer, static_axle_loads
 
     def body() -> str:
         p = ModelParams()
@@ -163,8 +160,6 @@ def check_spatial_dynamics(spatial_dynamics) -> CheckResult:
     The spatial-domain transform of the time-domain model, compared with
     :meth:`racing_lib.model.Model.dxi_ds` (relative 1e-9).
     """
-    from racing_lib.model import Model
-
     cases = [
         # xi = [v_x, v_y, r, e_psi, e_y, s], u = [delta, a_x], kappa
         ([30.0, 0.0, 0.0, 0.0, 0.0, 100.0], [0.0, 2.0], 0.0),

@@ -30,6 +30,11 @@ from racing_lib.grading.grader import (
     grade,
     refuse_library,
 )
+from racing_lib.model import ModelOptions, ModelParams
+from racing_lib.planning import solve_curvature
+from racing_lib.planning.curvature import steady_cornering
+from racing_lib.planning.speed import speed_profile
+from racing_lib.tracks import load_track
 
 __all__ = [
     "OvalTrack",
@@ -48,8 +53,6 @@ _SPACING = 5.0  # [m] node spacing of the exercise grid
 @functools.lru_cache(maxsize=1)
 def _grid() -> tuple[np.ndarray, np.ndarray, float]:
     """Arc length (m), centerline curvature (1/m) and length (m) of the expressway on a 5 m grid."""
-    from racing_lib.tracks import load_track
-
     path = load_track("expressway").centerline
     s = path.sample(ds=_SPACING)
     return s, np.asarray(path.curvature(s), dtype=float), path.length
@@ -66,8 +69,6 @@ def check_cornering_speed(cornering_speed) -> CheckResult:
     :func:`racing_lib.planning.speed.speed_profile` (a level road, relative 1e-9) along the
     expressway's centerline.
     """
-    from racing_lib.model import ModelParams
-    from racing_lib.planning.speed import speed_profile
 
     def body() -> str:
         s, kappa, length = _grid()
@@ -114,8 +115,6 @@ def check_lap_time(lap_time) -> CheckResult:
     Compared with ``lap_time`` of :func:`racing_lib.planning.speed.speed_profile` (1e-6 s) on two
     profiles of the expressway (with and without drag).
     """
-    from racing_lib.model import ModelOptions, ModelParams
-    from racing_lib.planning.speed import speed_profile
 
     def body() -> str:
         s, kappa, length = _grid()
@@ -154,9 +153,6 @@ def check_steady_cornering(steady_state) -> CheckResult:
     Compared with :func:`racing_lib.planning.curvature.steady_cornering` (relative 1e-9) for
     corners of both directions below the friction limit.
     """
-    from racing_lib.model import ModelParams
-    from racing_lib.planning.curvature import steady_cornering
-
     cases = [(30.0, 1 / 200.0), (25.0, -1 / 80.0), (15.0, 1 / 30.0), (40.0, -1 / 400.0)]
     names = (("v_y", "m/s", 1.0), ("r", "rad/s", 1.0), ("delta", "deg", _DEG))
 
@@ -303,8 +299,6 @@ def check_min_curvature_qp(min_curvature_line) -> CheckResult:
             raise Wrong(msg, 0.0, "Minimize the sum of squares of the line curvature, times ds.")
 
     def body() -> str:
-        from racing_lib.planning import solve_curvature
-
         refuse_library(
             min_curvature_line,
             {"solve_curvature": solve_curvature},

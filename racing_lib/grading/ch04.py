@@ -16,6 +16,7 @@ import math
 
 import numpy as np
 
+from racing_lib.grading.ch03 import oval_track
 from racing_lib.grading.grader import (
     CheckResult,
     Wrong,
@@ -27,6 +28,12 @@ from racing_lib.grading.grader import (
     grade,
     refuse_library,
 )
+from racing_lib.model import ModelParams
+from racing_lib.planning import plan, solve_time_optimal
+from racing_lib.planning.grid import TrackGrid
+from racing_lib.planning.speed import segment_times, speed_profile
+from racing_lib.planning.time_optimal import lap_time_with_model
+from racing_lib.tracks import load_track
 
 __all__ = ["check_min_time_nlp", "check_peak_slip_angle", "check_spatial_lap_time"]
 
@@ -36,17 +43,11 @@ _DEG = 180.0 / math.pi
 @functools.lru_cache(maxsize=1)
 def _grid():
     """The expressway on a 5 m planning grid."""
-    from racing_lib.planning.grid import TrackGrid
-    from racing_lib.tracks import load_track
-
     return TrackGrid.from_track(load_track("expressway"), spacing=5.0)
 
 
 def _lines(grid) -> list[tuple[str, tuple[np.ndarray, ...]]]:
     """(description, (v_x, v_y, e_psi, e_y)) of a few drives along the grid."""
-    from racing_lib.model import ModelParams
-    from racing_lib.planning.speed import speed_profile
-
     prof = speed_profile(grid.s, grid.kappa, ModelParams(), length=grid.length)
     n = grid.n
     phase = 2.0 * np.pi * grid.s / grid.length
@@ -67,7 +68,6 @@ def check_spatial_lap_time(lap_time) -> CheckResult:
 
     Compared with :func:`racing_lib.planning.time_optimal.lap_time_with_model` (1e-6 s).
     """
-    from racing_lib.planning.time_optimal import lap_time_with_model
 
     def body() -> str:
         grid = _grid()
@@ -102,7 +102,6 @@ def check_peak_slip_angle(peak_slip_angle) -> CheckResult:
     Compared with :meth:`racing_lib.model.ModelParams.peak_slip_angle` (relative 1e-9) for the
     default car and two other tyres.
     """
-    from racing_lib.model import ModelParams
 
     def body() -> str:
         tyres = [ModelParams(), ModelParams(B_f=8.0, C_f=1.3, B_r=14.0, C_r=1.6)]
@@ -128,8 +127,6 @@ def check_peak_slip_angle(peak_slip_angle) -> CheckResult:
 
 def _point_mass_lap_time(ds: float, v: np.ndarray) -> float:
     """Lap time (s) of node speeds v (m/s), uniform acceleration between nodes ``ds`` apart."""
-    from racing_lib.planning.speed import segment_times
-
     return float(np.sum(segment_times(ds, v, np.roll(v, -1))))
 
 
@@ -142,8 +139,6 @@ def _min_time_reference(grip: float, v_top: float) -> tuple[np.ndarray, float]:
     w: the problem has one optimum, which a conic solver finds to high accuracy.
     """
     import cvxpy as cp
-
-    from racing_lib.grading.ch03 import oval_track
 
     oval = oval_track()
     n = oval.s.size
@@ -171,7 +166,6 @@ def check_min_time_nlp(min_time_speeds) -> CheckResult:
     to 1e-4 (relative), found by a convex reformulation in v^2. The library's speed profile and
     planners are refused.
     """
-    from racing_lib.grading.ch03 import oval_track
 
     def check_case(case: tuple[float, float]) -> None:
         grip, v_top = case
@@ -211,9 +205,6 @@ def check_min_time_nlp(min_time_speeds) -> CheckResult:
             )
 
     def body() -> str:
-        from racing_lib.planning import plan, solve_time_optimal
-        from racing_lib.planning.speed import speed_profile
-
         refuse_library(
             min_time_speeds,
             {

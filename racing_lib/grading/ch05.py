@@ -18,6 +18,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from racing_lib.control.mpc import CoupledMPC, TrackingQP, steering_lag_coefficients
 from racing_lib.grading.grader import (
     CheckResult,
     Wrong,
@@ -30,7 +31,9 @@ from racing_lib.grading.grader import (
     grade,
     refuse_library,
 )
-from racing_lib.model import identified_params
+from racing_lib.model import PedalMap, identified_params
+from racing_lib.planning.trajectory import Trajectory
+from racing_lib.tracks import load_track
 
 __all__ = [
     "LateralMPCProblem",
@@ -48,10 +51,6 @@ _UNITS = ("m/s", "m/s", "rad/s", "rad", "m", "m")
 @functools.lru_cache(maxsize=1)
 def _mpc():
     """A coupled MPC on the expressway's centerline plan (built once: about 4 s)."""
-    from racing_lib.control.mpc import CoupledMPC
-    from racing_lib.planning.trajectory import Trajectory
-    from racing_lib.tracks import load_track
-
     track = load_track("expressway")
     return CoupledMPC(Trajectory.from_centerline(track, identified_params()), track=track)
 
@@ -119,7 +118,6 @@ def check_steering_lag(steering_lag) -> CheckResult:
     ``w delta_k + (1 - w) delta_cmd``; compared with
     :func:`racing_lib.control.mpc.steering_lag_coefficients` (relative 1e-9).
     """
-    from racing_lib.control.mpc import steering_lag_coefficients
 
     def check_case(case: tuple[float, float]) -> None:
         tau, dt = case
@@ -170,8 +168,6 @@ def check_pedal_inversion(pedal_for) -> CheckResult:
     term exceeds at low speed (brake, although a_x > 0). An answer that calls ``pedal_map.pedal``
     is refused.
     """
-    from racing_lib.model import PedalMap
-
     pedal_map = PedalMap(m_0=0.8, m_xi=(-0.05, 0.0, 0.0, 0.0, 0.0, 0.0), m_thr=3.5, m_brk=10.0)
     # (v_x m/s, a_x m/s^2); coasting gives 0.8 - 0.05 v_x: -1.2 at 40 m/s, +0.55 at 5 m/s.
     cases = [(40.0, 1.0), (40.0, -6.0), (20.0, 0.0), (15.0, 5.0), (50.0, -15.0), (30.0, -0.7),
@@ -392,8 +388,6 @@ def check_lateral_mpc(mpc_steering) -> CheckResult:
         )
 
     def body() -> str:
-        from racing_lib.control.mpc import CoupledMPC, TrackingQP
-
         refuse_library(
             mpc_steering,
             {"TrackingQP": TrackingQP, "CoupledMPC": CoupledMPC},

@@ -15,6 +15,8 @@ from collections.abc import Callable
 
 import numpy as np
 
+from racing_lib.experiments.lap import LapLog, LapMetrics
+from racing_lib.experiments.tuning import W_S, W_T, mpc_weight_space, tuning_objective
 from racing_lib.grading.grader import (
     CheckResult,
     Wrong,
@@ -26,6 +28,7 @@ from racing_lib.grading.grader import (
     grade,
     refuse_library,
 )
+from racing_lib.optim import cmaes as library_cmaes
 
 __all__ = [
     "CMA_BUDGET",
@@ -48,11 +51,6 @@ def synthetic_lap(
     beyond, logged every 0.1 s; ``ey_scale`` (m) sets its lateral errors, ``wall_time`` and
     ``offtrack_time`` (s) its collision times.
     """
-    from racing_lib.experiments.lap import (
-        LapLog,
-        LapMetrics,
-    )
-
     rng = np.random.default_rng(seed)
     dt = 0.1
     n = int((_LENGTH + 300.0) / (45.0 * dt))
@@ -105,12 +103,6 @@ def check_tuning_objective(objective) -> CheckResult:
     Compared with :func:`racing_lib.experiments.tuning.tuning_objective` (1e-9) on three laps: a
     clean one, one that touches a wall, and one that leaves an open track.
     """
-    from racing_lib.experiments.tuning import (
-        W_S,
-        W_T,
-        tuning_objective,
-    )
-
     laps = [
         ("a clean lap", synthetic_lap(0)),
         ("a lap with 0.8 s against the wall", synthetic_lap(1, wall_time=0.8, ey_scale=1.5)),
@@ -159,8 +151,6 @@ def check_search_space(to_params) -> CheckResult:
     Compared with :meth:`racing_lib.optim.cmaes.SearchSpace.to_params` (relative 1e-9) on the six
     MPC weights, with points inside and outside the box.
     """
-    from racing_lib.experiments.tuning import mpc_weight_space
-
     space = mpc_weight_space()
     lo, hi = space.log_bounds()
     rng = np.random.default_rng(3)
@@ -260,8 +250,6 @@ def check_cma_es(cma_es) -> CheckResult:
         )
 
     def body() -> str:
-        from racing_lib.optim import cmaes as library_cmaes
-
         refuse_library(
             cma_es,
             {

@@ -36,9 +36,10 @@ import types
 from collections.abc import Callable, Iterable, Mapping
 from contextlib import contextmanager
 from dataclasses import dataclass
-from typing import Any, Literal
+from typing import Literal, TypeVar
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 __all__ = [
     "CORRECT",
@@ -57,6 +58,9 @@ __all__ = [
     "refuse_library",
     "score",
 ]
+
+# What the reader's function returns (call), or a case of a check (every_case).
+_T = TypeVar("_T")
 
 Status = Literal["correct", "wrong", "not done yet", "error", "too slow"]
 
@@ -156,7 +160,7 @@ def score(results: Iterable[CheckResult]) -> tuple[float, float]:
     return sum(r.points for r in results), sum(r.weight for r in results)
 
 
-def _describe_args(args: tuple[Any, ...]) -> str:
+def _describe_args(args: tuple[object, ...]) -> str:
     parts = []
     for a in args:
         if isinstance(a, float | int | np.floating | np.integer):
@@ -168,7 +172,7 @@ def _describe_args(args: tuple[Any, ...]) -> str:
     return ", ".join(parts)
 
 
-def call(fn: Callable[..., Any], *args: Any, **kwargs: Any) -> Any:
+def call(fn: Callable[..., _T], *args: object, **kwargs: object) -> _T:
     """Call the reader's function; turn "not written yet" and crashes into check outcomes.
 
     Raises
@@ -196,7 +200,7 @@ def call(fn: Callable[..., Any], *args: Any, **kwargs: Any) -> Any:
     return out
 
 
-def as_float(value: Any, what: str) -> float:
+def as_float(value: object, what: str) -> float:
     """``value`` as a finite float, or :class:`Wrong` naming ``what`` was returned."""
     try:
         out = float(np.asarray(value, dtype=float).reshape(()))
@@ -207,7 +211,7 @@ def as_float(value: Any, what: str) -> float:
     return out
 
 
-def as_array(value: Any, shape: tuple[int, ...], what: str) -> np.ndarray:
+def as_array(value: object, shape: tuple[int, ...], what: str) -> np.ndarray:
     """``value`` as a finite float array of ``shape``, or :class:`Wrong`."""
     try:
         arr = np.asarray(value, dtype=float)
@@ -223,7 +227,7 @@ def as_array(value: Any, shape: tuple[int, ...], what: str) -> np.ndarray:
     return arr
 
 
-def as_tuple(value: Any, n: int, what: str) -> tuple[Any, ...]:
+def as_tuple(value: object, n: int, what: str) -> tuple[object, ...]:
     """``value`` as a tuple of ``n`` items, or :class:`Wrong` saying what was expected."""
     if isinstance(value, np.ndarray) and value.shape[:1] == (n,):
         return tuple(value)
@@ -233,7 +237,7 @@ def as_tuple(value: Any, n: int, what: str) -> tuple[Any, ...]:
     return tuple(value)
 
 
-def differs(got: Any, expected: Any, *, tol: float, rel: float = 0.0) -> bool:
+def differs(got: ArrayLike, expected: ArrayLike, *, tol: float, rel: float = 0.0) -> bool:
     """True when any element of ``got`` is off ``expected`` by more than ``tol + rel |expected|``.
 
     ``tol`` is absolute, in the quantity's unit; NaN in ``got`` always differs.
@@ -258,7 +262,7 @@ def expect_close(
         raise Wrong(message.format(expected=e, got=g, diff=g - e, absdiff=abs(g - e)))
 
 
-def every_case(cases: Iterable[Any], check_case: Callable[[Any], None]) -> None:
+def every_case(cases: Iterable[_T], check_case: Callable[[_T], None]) -> None:
     """Run ``check_case`` on every case; raise one :class:`Wrong` that reports each failure.
 
     The message starts with the most telling failure (highest :attr:`Wrong.telling`, then the
@@ -290,11 +294,11 @@ def every_case(cases: Iterable[Any], check_case: Callable[[Any], None]) -> None:
     raise Wrong(f"{len(failures)} of {len(cases)} cases are wrong. {text}\nAlso:\n{others}")
 
 
-def _module_of(obj: Any) -> str:
+def _module_of(obj: object) -> str:
     return getattr(obj, "__module__", None) or ""
 
 
-def _names_used(fn: Callable[..., Any], depth: int = 3) -> list[tuple[str, Any]]:
+def _names_used(fn: Callable[..., object], depth: int = 3) -> list[tuple[str, object]]:
     """(name, bound object or None) of the globals, attributes and closure variables of ``fn``.
 
     Follows the reader's own helper functions (any function not from racing_lib) ``depth`` deep.
@@ -327,7 +331,7 @@ def _names_used(fn: Callable[..., Any], depth: int = 3) -> list[tuple[str, Any]]
     return used
 
 
-def refuse_library(fn: Callable[..., Any], forbidden: Mapping[str, Any], task: str) -> None:
+def refuse_library(fn: Callable[..., object], forbidden: Mapping[str, object], task: str) -> None:
     """Raise :class:`Wrong` when the reader's function calls what the exercise asks them to write.
 
     Parameters
@@ -365,7 +369,7 @@ def _time_limit(seconds: float | None):
         yield
         return
 
-    def _alarm(signum: int, frame: Any) -> None:
+    def _alarm(signum: int, frame: types.FrameType | None) -> None:
         raise _TimeLimit()
 
     previous = signal.signal(signal.SIGALRM, _alarm)

@@ -8,12 +8,20 @@ from __future__ import annotations
 
 import functools
 import math
-from typing import Any
 
+import casadi as ca
 import numpy as np
 
 from racing_lib.jit import compiled_or_interpreted
-from racing_lib.model import NU, NX
+from racing_lib.model import (
+    NU,
+    NX,
+    ModelOptions,
+    ModelParams,
+    discretize,
+    jacobians,
+    time_dynamics,
+)
 from racing_lib.model.actuator import steering_lag_coefficients
 
 __all__ = [
@@ -27,8 +35,8 @@ __all__ = [
 
 @functools.lru_cache(maxsize=16)
 def substep_linearization(
-    params: Any, options: Any, dt: float, substeps: int, jit: bool = False
-) -> Any:
+    params: ModelParams, options: ModelOptions, dt: float, substeps: int, jit: bool = False
+) -> ca.Function:
     """CasADi Function ``(xi_bar, u_bar, kappa, theta) -> (A_d, B_d, d_d)`` of chained RK4 steps.
 
     CasADi Function ``(xi_bar, u_bar, kappa, theta) -> (A_d, B_d, d_d)`` of ``substeps`` chained
@@ -40,10 +48,6 @@ def substep_linearization(
     build on disk by the hash of its code), which makes it about eight times faster than CasADi's
     interpreter; without a compiler it falls back to the interpreter with a warning.
     """
-    import casadi as ca
-
-    from racing_lib.model import discretize
-
     F = discretize(params, options, dt / substeps, "rk4", "time")
     xi, u = ca.SX.sym("xi", NX), ca.SX.sym("u", NU)
     kappa, theta = ca.SX.sym("kappa"), ca.SX.sym("theta")
@@ -59,7 +63,7 @@ def substep_linearization(
     return fn
 
 
-def packed_map(lin: Any, horizon: int) -> Any:
+def packed_map(lin: ca.Function, horizon: int) -> ca.Function:
     """``lin`` mapped over the horizon, with one input and one dense output.
 
     Parameters
@@ -77,8 +81,6 @@ def packed_map(lin: Any, horizon: int) -> Any:
         to numpy costs tens of microseconds each, as much as the compiled linearization itself,
         so one packed matrix each way saves a third of the step's linearization time.
     """
-    import casadi as ca
-
     nx, nu = lin.size1_in(0), lin.size1_in(1)
     z = ca.MX.sym("z", nx + nu + 2, horizon)
     A, B, d = lin.map(horizon)(z[:nx, :], z[nx : nx + nu, :], z[nx + nu, :], z[nx + nu + 1, :])
@@ -86,7 +88,9 @@ def packed_map(lin: Any, horizon: int) -> Any:
     return ca.Function("linearization_packed", [z], [ca.densify(out)])
 
 
-def unpack_linearization(packed: Any, horizon: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def unpack_linearization(
+    packed: ca.DM | np.ndarray, horizon: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``A (N, 6, 6), B (N, 6, 2), d (N, 6)`` from the output of :func:`packed_map`.
 
     ``packed`` is the CasADi matrix, or its elements in column-major order as a numpy array
@@ -100,15 +104,11 @@ def unpack_linearization(packed: Any, horizon: int) -> tuple[np.ndarray, np.ndar
     return A, B, out[:, nx * (nx + nu) :]
 
 
-def continuous_linearization(params: Any, options: Any) -> Any:
+def continuous_linearization(params: ModelParams, options: ModelOptions) -> ca.Function:
     """CasADi Function ``(xi, u, kappa, theta) -> (A_c, B_c, c)``: the model linearized in time.
 
     ``xi_dot ~= A_c xi + B_c u + c`` near the point, with ``c = f - A_c xi - B_c u``.
     """
-    import casadi as ca
-
-    from racing_lib.model import jacobians, time_dynamics
-
     f = time_dynamics(params, options)
     jac = jacobians(params, options, "time")
     xi, u = ca.SX.sym("xi", NX), ca.SX.sym("u", NU)

@@ -22,9 +22,10 @@ Used by the tests (CI recomputes the ``main`` row) and by ``racing-lib ablation 
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
+
+from racing_lib.experiments.ablation.rows import TableRow
 
 #: Standard errors allowed between two means (3: a false alarm about 3 times in 1,000).
 Z = 3.0
@@ -71,7 +72,7 @@ class Check:
         return abs(self.difference) <= self.tolerance
 
 
-def _per_lap(row: Mapping[str, Any], key: str) -> list[float]:
+def _per_lap(row: TableRow, key: str) -> list[float]:
     values = [m.get(key) for m in row.get("trial_metrics", [])]
     return [float(v) for v in values if v is not None and math.isfinite(float(v))]
 
@@ -84,9 +85,7 @@ def _sd(values: Sequence[float]) -> float:
     return math.sqrt(sum((v - mean) ** 2 for v in values) / (n - 1))
 
 
-def _mean_check(
-    name: str, quantity: str, a: Mapping[str, Any], b: Mapping[str, Any], key: str
-) -> Check:
+def _mean_check(name: str, quantity: str, a: TableRow, b: TableRow, key: str) -> Check:
     """Compare the per-lap means of ``key`` (over the trials) of two rows.
 
     A side with a single lap has no spread of its own; it borrows the other side's.
@@ -102,12 +101,12 @@ def _mean_check(
     return Check(name, quantity, ma, mb, max(Z * se, floor))
 
 
-def compare_rows(shipped: Mapping[str, Any], recomputed: Mapping[str, Any]) -> list[Check]:
+def compare_rows(shipped: TableRow, recomputed: TableRow) -> list[Check]:
     """The checks of one row: planned lap, per-lap means, completed laps, wall contacts.
 
     Parameters
     ----------
-    shipped, recomputed : dict
+    shipped, recomputed : TableRow
         Two rows of the same name, as :func:`racing_lib.experiments.ablation.run_ablation`
         returns them.
     """

@@ -23,6 +23,7 @@ from racing_lib.vehicle import VehicleParams
 
 __all__ = [
     "FORMAT",
+    "KeyInputs",
     "code_digests",
     "compact_json",
     "digest",
@@ -45,11 +46,15 @@ _PLAN_CODE = ("racing_lib.planning",)
 _BEST_LAP_CODE = (*_PLAN_CODE, "racing_lib.planning.best_lap")
 _LAP_CODE = ("racing_lib.experiments.ablation.runner",)
 
+#: What a cache key hashes (see :func:`plan_key_inputs` and :func:`row_key_inputs`): a JSON
+#: object of names, numbers, the model's and the car's parameters and code digests, hence ``Any``.
+KeyInputs = dict[str, Any]
+
 # --------------------------------------------------------------------------------------------------
 # Cache keys
 
 
-def _json_default(obj: Any) -> Any:
+def _json_default(obj: object) -> object:
     if isinstance(obj, np.ndarray):
         return obj.tolist()
     if isinstance(obj, np.generic):
@@ -59,7 +64,7 @@ def _json_default(obj: Any) -> Any:
     raise TypeError(f"not JSON-serializable for a cache key: {type(obj).__name__}")
 
 
-def digest(obj: Any) -> str:
+def digest(obj: object) -> str:
     """Hash (hex, 16 characters) of a JSON-able object, independent of dict order."""
     text = json.dumps(obj, sort_keys=True, separators=(",", ":"), default=_json_default)
     return hashlib.sha256(text.encode()).hexdigest()[:16]
@@ -78,7 +83,7 @@ def code_digests() -> dict[str, str]:
     }
 
 
-def _planning_model(row: AblationRow) -> dict[str, Any]:
+def _planning_model(row: AblationRow) -> KeyInputs:
     """What the row's plan is made with: the configuration's model, or the car's own equations."""
     if row.best_lap:
         return {"vehicle": dataclasses.asdict(VehicleParams())}
@@ -89,7 +94,7 @@ def _plan_method(row: AblationRow) -> str:
     return "best-lap" if row.best_lap else str(TUNING_CONFIGS[row.config]["method"])
 
 
-def plan_options(row: AblationRow) -> dict[str, Any]:
+def plan_options(row: AblationRow) -> dict[str, bool]:
     """The model effects a row's configuration sets (none for the best lap)."""
     # The best lap uses the car's own equations: model options do not apply to it.
     return {} if row.best_lap else dict(TUNING_CONFIGS[row.config]["options"])
@@ -97,7 +102,7 @@ def plan_options(row: AblationRow) -> dict[str, Any]:
 
 def plan_key_inputs(
     row: AblationRow, track: Track, spacing: float | None, code: Mapping[str, str]
-) -> dict[str, Any]:
+) -> KeyInputs:
     """What determines a row's plan: track, method, options, parameters, spacing, planner code."""
     return {
         "kind": "plan",
@@ -119,7 +124,7 @@ def row_key_inputs(
     weights: dict[str, float] | None,
     seeds: Sequence[int],
     code: Mapping[str, str],
-) -> dict[str, Any]:
+) -> KeyInputs:
     """What determines a row's laps: its plan's key, controller, weights, seeds and the lap code."""
     cfg = TUNING_CONFIGS[row.config]
     return {
@@ -146,6 +151,6 @@ def row_key_inputs(
 # A row from its trials
 
 
-def compact_json(obj: Any) -> str:
+def compact_json(obj: object) -> str:
     """One line of JSON without spaces (the profiles are most of a row: keep files small)."""
     return json.dumps(obj, sort_keys=True, separators=(",", ":"), allow_nan=False)

@@ -11,10 +11,12 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from typing import Any
 
 import numpy as np
 from scipy.interpolate import CubicSpline
+
+from racing_lib.experiments.ablation.rows import TableRow
+from racing_lib.geometry import Corner, Track
 
 __all__ = [
     "PAPER",
@@ -105,7 +107,7 @@ PAPER_COLUMNS: dict[str, str] = {
 }
 
 
-def row_measures(row: Mapping[str, Any]) -> dict[str, float | None]:
+def row_measures(row: TableRow) -> dict[str, float | None]:
     """The fields of :data:`PAPER_FIELDS` that our table has, from one of its rows.
 
     Lap times are ``inf`` (and their spread NaN) when no lap was completed; ``walls`` is the wall
@@ -125,13 +127,13 @@ def row_measures(row: Mapping[str, Any]) -> dict[str, float | None]:
     }
 
 
-def plan_gap(measures: Mapping[str, Any]) -> float:
+def plan_gap(measures: Mapping[str, float | None]) -> float:
     """How much slower the closed loop is than the plan it tracks, as a fraction (0.01 = 1 %)."""
     return measures["mean"] / measures["planned"] - 1.0
 
 
 def relative_to(
-    table: Mapping[str, Mapping[str, Any]], name: str, base: str
+    table: Mapping[str, Mapping[str, float | None]], name: str, base: str
 ) -> tuple[float, float, float, float]:
     """Row ``name`` against row ``base`` of the same table (the paper's or ours).
 
@@ -150,7 +152,7 @@ def relative_to(
     )
 
 
-def row_profile(row: Mapping[str, Any], part: str, key: str) -> np.ndarray:
+def row_profile(row: TableRow, part: str, key: str) -> np.ndarray:
     """One profile quantity of a row as a float array on its grid (NaN where the lap stopped).
 
     ``part`` is ``"plan"`` or ``"closed_loop"``; ``key`` one of its fields (``vx_mps``, ``n_m``,
@@ -160,7 +162,7 @@ def row_profile(row: Mapping[str, Any], part: str, key: str) -> np.ndarray:
 
 
 def row_line_xy(
-    track: Any, row: Mapping[str, Any], part: str, step: float = 1.0
+    track: Track, row: TableRow, part: str, step: float = 1.0
 ) -> tuple[np.ndarray, np.ndarray]:
     """The line of a row (its plan or its closed loop) as x, y arrays every ``step`` m, m.
 
@@ -179,7 +181,7 @@ def row_line_xy(
     return x, y
 
 
-def corner_window(track: Any, corner: Any, s: np.ndarray, margin: float = 30.0) -> np.ndarray:
+def corner_window(track: Track, corner: Corner, s: np.ndarray, margin: float = 30.0) -> np.ndarray:
     """Which points of the grid ``s`` (m) lie between a corner's entry and exit, plus ``margin``.
 
     Periodic in the track's length, so a corner across the start/finish line is whole.
@@ -203,7 +205,7 @@ def nearest_corner(corners: Mapping[int, float], s: float, length: float | None 
     return min(corners, key=distance)
 
 
-def below_plan(row: Mapping[str, Any], by: float = 1.0) -> float:
+def below_plan(row: TableRow, by: float = 1.0) -> float:
     """Share of the lap (0-1) where the closed loop (seed 0) is over ``by`` m/s below its plan."""
     short = row_profile(row, "plan", "vx_mps") - row_profile(row, "closed_loop", "vx_mps")
     return float(np.mean(short[np.isfinite(short)] > by))

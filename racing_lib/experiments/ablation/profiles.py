@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from typing import Any
 
 import numpy as np
 
+from racing_lib.experiments.lap import LapLog
 from racing_lib.geometry import Track
 from racing_lib.planning.trajectory import Trajectory
 
@@ -49,7 +49,7 @@ def profile_grid(track: Track) -> np.ndarray:
     return np.arange(0.0, float(track.length), PROFILE_SPACING)
 
 
-def closed_loop_profile(log: Any, track: Track) -> dict[str, list[float | None]]:
+def closed_loop_profile(log: LapLog, track: Track) -> dict[str, list[float | None]]:
     """The closed-loop lap on the track-centerline grid (every :data:`PROFILE_SPACING` m)."""
     lap = log.in_lap if log.in_lap.any() else np.ones_like(log.in_lap)
     s = np.asarray(log.s_track, dtype=float)[lap]

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import Any
 
@@ -16,6 +16,7 @@ __all__ = [
     "DEFAULT_TRIALS",
     "FAST_TRIALS",
     "AblationRow",
+    "TableRow",
     "ablation_rows",
     "default_trials",
     "format_number",
@@ -26,6 +27,12 @@ __all__ = [
 DEFAULT_TRIALS = 10
 #: Trials per row in fast mode (tests, CI): fewer laps, the same algorithm.
 FAST_TRIALS = 2
+
+#: One computed row of the tables, as :func:`~racing_lib.experiments.ablation.run_ablation`
+#: returns it and the table file stores it: a JSON object (name, track, configuration, trials,
+#: lap-time and error statistics, per-trial metrics, plan and profiles). Its values are numbers,
+#: strings, lists and nested objects, hence ``Any``.
+TableRow = dict[str, Any]
 
 # Labels of the table's rows in the paper's words ("without" = the paper's cross mark).
 _LABELS = {
@@ -156,12 +163,12 @@ def default_trials() -> int:
     return FAST_TRIALS if fast_mode() else DEFAULT_TRIALS
 
 
-def format_number(x: Any, decimals: int) -> str:
+def format_number(x: float | None, decimals: int) -> str:
     """``x`` with ``decimals`` digits, or ``-`` when there is no value."""
     return "-" if x is None else f"{float(x):.{decimals}f}"
 
 
-def row_summary(row: Mapping[str, Any]) -> str:
+def row_summary(row: TableRow) -> str:
     """One line on a row: planned and closed-loop lap time, errors, walls."""
     mean = row.get("lap_time_mean_s")
     lap = f"{mean:.2f} +- {row['lap_time_std_s']:.3f} s" if mean is not None else "no lap completed"

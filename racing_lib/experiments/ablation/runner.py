@@ -16,8 +16,10 @@ from typing import Any
 import numpy as np
 
 from racing_lib.config import fast_mode
+from racing_lib.control.mpc import MPCSettings
 from racing_lib.errors import ControlError, PlanningError, RacingLibError
 from racing_lib.experiments.ablation.keys import (
+    KeyInputs,
     code_digests,
     compact_json,
     digest,
@@ -34,6 +36,7 @@ from racing_lib.experiments.ablation.profiles import (
 )
 from racing_lib.experiments.ablation.rows import (
     AblationRow,
+    TableRow,
     default_trials,
     row_summary,
     select_rows,
@@ -54,6 +57,7 @@ from racing_lib.experiments.lap import (
 from racing_lib.experiments.tuning import MPC_WEIGHT_NAMES
 from racing_lib.geometry import Track
 from racing_lib.io import atomic_write_text, jsonable
+from racing_lib.planning.best_lap import BestLapSettings, solve_best_lap
 from racing_lib.planning.trajectory import Trajectory
 from racing_lib.tracks import load_track
 
@@ -69,8 +73,6 @@ DEFAULT_OUT = "runs/ablation"
 def _make_plan(row: AblationRow, track: Track, spacing: float | None) -> tuple[Trajectory, dict]:
     """Plan a row (no cache): its configuration's planner, or the best possible lap."""
     if row.best_lap:
-        from racing_lib.planning.best_lap import BestLapSettings, solve_best_lap
-
         settings = BestLapSettings() if spacing is None else BestLapSettings(spacing=spacing)
         tic = time.perf_counter()
         res = solve_best_lap(track, settings=settings)
@@ -193,8 +195,6 @@ def _pooled(values: Sequence[np.ndarray]) -> tuple[float, float, float]:
 
 def _effective_weights(weights: dict[str, float] | None) -> dict[str, float]:
     """The MPC weights actually used: the given ones over the MPC's defaults."""
-    from racing_lib.control.mpc import MPCSettings
-
     defaults = MPCSettings()
     return {
         **{n: float(getattr(defaults, n)) for n in MPC_WEIGHT_NAMES},
@@ -211,9 +211,9 @@ def _row_result(
     seeds: Sequence[int],
     outcomes: Sequence[_TrialOutcome],
     key: str,
-    key_inputs: dict[str, Any],
+    key_inputs: KeyInputs,
     wall_time: float,
-) -> dict[str, Any]:
+) -> TableRow:
     """The JSON row of the table from a row's trials."""
     cfg = TUNING_CONFIGS[row.config]
     metrics = [o.metrics for o in outcomes]
@@ -236,7 +236,7 @@ def _row_result(
             **profile,
             "plan": plan_profile(trajectory, track),
         }
-    row_dict: dict[str, Any] = {
+    row_dict: TableRow = {
         "name": row.name,
         "label": row.label,
         "table": row.table,
@@ -291,7 +291,7 @@ def _row_file(folder: FilePath, name: str, key: str) -> FilePath:
     return folder / "rows" / f"{name}-{key}.json"
 
 
-def _load_row(path: FilePath, key: str) -> dict[str, Any] | None:
+def _load_row(path: FilePath, key: str) -> TableRow | None:
     """A cached row if ``path`` holds one with this key (None if missing or damaged)."""
     if not path.exists():
         return None
@@ -328,9 +328,9 @@ def run_ablation(
     tracks: Mapping[str, Track] | None = None,
     progress: bool = True,
     log: Callable[[str], None] | None = None,
-    on_row: Callable[[dict[str, Any], bool], None] | None = None,
+    on_row: Callable[[TableRow, bool], None] | None = None,
     cached_only: bool = False,
-) -> list[dict[str, Any]]:
+) -> list[TableRow]:
     """Compute rows of the tables (or reuse them from the cache folder).
 
     Each row is planned once (plans are cached too), then driven for ``trials`` seeded laps
@@ -371,7 +371,7 @@ def run_ablation(
 
     Returns
     -------
-    list of dict
+    list of TableRow
         One JSON-ready dict per row, in table order: ``name``, ``planned_lap_time_s``,
         ``lap_time_mean_s``, ``lap_time_std_s``, ``lap_time_min_s``, ``completed``,
         ``vx_mae_mps`` / ``vx_mae_std_mps`` / ``vx_max_err_mps`` (mean, std and maximum of
@@ -402,7 +402,7 @@ def run_ablation(
 
     from tqdm.auto import tqdm
 
-    results: list[dict[str, Any]] = []
+    results: list[TableRow] = []
     bar = tqdm(
         total=len(selected), desc="ablation", unit="row", disable=not progress or cached_only
     )
@@ -501,10 +501,10 @@ def _drive_row(
     weights: dict[str, float] | None,
     seeds: list[int],
     key: str,
-    key_inputs: dict[str, Any],
+    key_inputs: KeyInputs,
     pool: _LapPool,
     say: Callable[[str], None],
-) -> dict[str, Any]:
+) -> TableRow:
     """Drive the seeded trials of one row on its plan and summarize them.
 
     Parameters
@@ -530,7 +530,7 @@ def _drive_row(
 
     Returns
     -------
-    dict
+    TableRow
         The row's JSON-ready result (see :func:`run_ablation`).
     """
     spec = config_spec(row.config, trk, trajectory=traj, weights=weights)
@@ -554,7 +554,7 @@ def _drive_row(
 
 
 def _save_row(
-    result: dict[str, Any], path: FilePath | None, name: str, say: Callable[[str], None]
+    result: TableRow, path: FilePath | None, name: str, say: Callable[[str], None]
 ) -> None:
     """Write a row's result to its cache file (atomically; ``path`` None: not cached), say so."""
     if path is not None:

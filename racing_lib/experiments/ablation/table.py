@@ -20,7 +20,7 @@ from racing_lib.experiments.ablation.keys import (
     plan_key_inputs,
     row_key_inputs,
 )
-from racing_lib.experiments.ablation.rows import ablation_rows, format_number
+from racing_lib.experiments.ablation.rows import TableRow, ablation_rows, format_number
 from racing_lib.experiments.ablation.runner import DEFAULT_OUT, resolve_tracks, run_ablation
 from racing_lib.experiments.configs import (
     tuned_weights,
@@ -32,6 +32,7 @@ from racing_lib.provenance import environment
 __all__ = [
     "SHIPPED_TABLE_FILE",
     "TABLE_FORMAT",
+    "TableFile",
     "format_table",
     "generate_ablation_table",
     "load_table",
@@ -44,13 +45,18 @@ __all__ = [
 TABLE_FORMAT = 2
 #: The shipped full-mode table, in ``racing_lib/data``.
 SHIPPED_TABLE_FILE = "ablation_table.json"
+#: A table file's JSON object: its header (``format``, ``created_utc``, ``provenance``,
+#: ``fast_mode``, ``trials``, ``workers``, ``wall_time_s``, and ``probes`` once restamped) and,
+#: as :func:`load_table` returns it, its ``rows``. Its values are numbers, strings, lists and
+#: nested objects, hence ``Any``.
+TableFile = dict[str, Any]
 
 
 # --------------------------------------------------------------------------------------------------
 # The table as the paper prints it
 
 
-def table_records(rows: Iterable[Mapping[str, Any]]) -> list[dict[str, str]]:
+def table_records(rows: Iterable[TableRow]) -> list[dict[str, str]]:
     """The paper's columns as formatted text, one dict per row.
 
     Columns: ``row``, ``planned lap [s]``, ``closed-loop lap [s]`` (mean +- std (min)),
@@ -88,7 +94,7 @@ def table_records(rows: Iterable[Mapping[str, Any]]) -> list[dict[str, str]]:
 
 
 def format_table(
-    rows: Iterable[Mapping[str, Any]],
+    rows: Iterable[TableRow],
     markdown: bool = False,
     sources: Sequence[str] | None = None,
 ) -> str:
@@ -96,7 +102,7 @@ def format_table(
 
     Parameters
     ----------
-    rows : iterable of dict
+    rows : iterable of TableRow
         Rows of :func:`run_ablation` or :func:`shipped_table`.
     markdown : bool
         Markdown table (``IPython.display.Markdown`` renders it) instead of plain text.
@@ -128,12 +134,12 @@ def _shipped_path() -> FilePath:
     return data_file(SHIPPED_TABLE_FILE)
 
 
-def load_table(path: str | os.PathLike[str]) -> dict[str, Any]:
+def load_table(path: str | os.PathLike[str]) -> TableFile:
     """A table file written by :func:`generate_ablation_table` (the whole object).
 
     Returns
     -------
-    dict
+    TableFile
         ``format``, ``created_utc``, ``fast_mode``, ``trials``, ``wall_time_s`` and ``rows``.
     """
     try:
@@ -166,7 +172,7 @@ def load_table(path: str | os.PathLike[str]) -> dict[str, Any]:
     return data
 
 
-def shipped_table_header() -> dict[str, Any]:
+def shipped_table_header() -> TableFile:
     """The shipped table's header.
 
     Format, date, trials, wall time and ``provenance`` (the machine, BLAS kernel and package
@@ -176,7 +182,7 @@ def shipped_table_header() -> dict[str, Any]:
     return {k: v for k, v in data.items() if k != "rows"}
 
 
-def _read_shipped() -> dict[str, Any]:
+def _read_shipped() -> TableFile:
     ref = data_file(SHIPPED_TABLE_FILE)
     if not ref.is_file():
         raise RacingLibError(
@@ -188,7 +194,7 @@ def _read_shipped() -> dict[str, Any]:
         return load_table(path)
 
 
-def shipped_table() -> list[dict[str, Any]]:
+def shipped_table() -> list[TableRow]:
     """The rows of the full-mode table shipped in ``racing_lib/data/ablation_table.json``.
 
     Loads in milliseconds; notebook 07 reads it instead of recomputing (about five minutes on two
@@ -202,9 +208,7 @@ def shipped_table() -> list[dict[str, Any]]:
     return _read_shipped()["rows"]
 
 
-def stale_rows(
-    rows: Iterable[Mapping[str, Any]], tracks: Mapping[str, Track] | None = None
-) -> list[str]:
+def stale_rows(rows: Iterable[TableRow], tracks: Mapping[str, Track] | None = None) -> list[str]:
     """Names of the rows that the current code and data would not reproduce.
 
     A row is stale when its cache key differs from the one computed now from the same seeds and
@@ -229,14 +233,14 @@ def stale_rows(
     return stale
 
 
-def _row_digest(row: Mapping[str, Any]) -> str:
+def _row_digest(row: TableRow) -> str:
     """SHA-256 of a row's JSON (its own ``sha256`` field left out)."""
     return hashlib.sha256(
         compact_json({k: v for k, v in row.items() if k != "sha256"}).encode("utf-8")
     ).hexdigest()
 
 
-def _table_text(header: Mapping[str, Any], rows: Sequence[Mapping[str, Any]]) -> str:
+def _table_text(header: TableFile, rows: Sequence[TableRow]) -> str:
     """JSON with one row per line: small diffs when a row changes, still one JSON object.
 
     Each row carries the checksum of its own numbers, so that :func:`load_table` refuses a row
@@ -254,8 +258,9 @@ def generate_ablation_table(
     out_dir: str | os.PathLike[str] | None = DEFAULT_OUT,
     target: str | os.PathLike[str] | None = None,
     progress: bool = True,
+    # Any: forwarded to run_ablation, whose keywords have different types (see **kwargs below).
     **kwargs: Any,
-) -> list[dict[str, Any]]:
+) -> list[TableRow]:
     """Recompute every row (reusing the cache) and write the shipped table (maintainers).
 
     Run after a change to the planner, the MPC, the car or the tuned weights, then commit

@@ -25,7 +25,6 @@ import os
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path as FilePath
-from typing import Any
 
 from racing_lib.errors import RacingLibError
 from racing_lib.experiments.ablation.keys import (
@@ -34,9 +33,10 @@ from racing_lib.experiments.ablation.keys import (
     plan_key_inputs,
     row_key_inputs,
 )
-from racing_lib.experiments.ablation.rows import ablation_rows
+from racing_lib.experiments.ablation.rows import TableRow, ablation_rows
 from racing_lib.experiments.ablation.runner import resolve_tracks, run_ablation
 from racing_lib.experiments.ablation.table import (
+    TableFile,
     _read_shipped,
     _shipped_path,
     _table_text,
@@ -91,7 +91,7 @@ def blas_kernel() -> str:
     return str(environment()["blas"])
 
 
-def probe(row: Mapping[str, Any]) -> str:
+def probe(row: TableRow) -> str:
     """Digest of a row's planned lap time and first lap (all but its wall-clock times).
 
     Two runs of the same code on the same BLAS kernel give the same probe; a change of a single
@@ -103,7 +103,7 @@ def probe(row: Mapping[str, Any]) -> str:
     return digest({"planned_lap_time_s": row["planned_lap_time_s"], "first_lap": lap})
 
 
-def _reference_probes(header: Mapping[str, Any], rows: Sequence[Mapping[str, Any]]) -> dict:
+def _reference_probes(header: TableFile, rows: Sequence[TableRow]) -> dict[str, str]:
     """The probes this kernel can be compared with: the table's own, or the header's record."""
     kernel = blas_kernel()
     if header.get("provenance", {}).get("blas") == kernel:
@@ -112,10 +112,10 @@ def _reference_probes(header: Mapping[str, Any], rows: Sequence[Mapping[str, Any
 
 
 def _recompute_first_laps(
-    names: Sequence[str], rows: Mapping[str, Mapping[str, Any]], workers: int
-) -> dict[str, dict[str, Any]]:
+    names: Sequence[str], rows: Mapping[str, TableRow], workers: int
+) -> dict[str, TableRow]:
     """Each named row recomputed for its first seed only (no cache), by name."""
-    out: dict[str, dict[str, Any]] = {}
+    out: dict[str, TableRow] = {}
     # Rows are grouped by their first seed and plan spacing, as run_ablation takes one of each.
     groups: dict[tuple[int, float | None], list[str]] = {}
     for name in names:
@@ -137,12 +137,12 @@ def _recompute_first_laps(
 
 
 def verify_table(
-    rows: Sequence[Mapping[str, Any]] | None = None,
-    header: Mapping[str, Any] | None = None,
+    rows: Sequence[TableRow] | None = None,
+    header: TableFile | None = None,
     *,
     workers: int = 2,
     log: Callable[[str], None] | None = None,
-) -> tuple[list[RowCheck], dict[str, dict[str, Any]]]:
+) -> tuple[list[RowCheck], dict[str, TableRow]]:
     """Judge every row of a table (default: the shipped one) against the current code.
 
     Rows whose key matches cost nothing; the others are recomputed for their first seed (about
@@ -150,7 +150,8 @@ def verify_table(
 
     Parameters
     ----------
-    rows, header : optional
+    rows : sequence of TableRow, optional
+    header : TableFile, optional
         The table's rows and header (default: the shipped table's).
     workers : int
         Worker processes for the recomputed laps.
@@ -161,7 +162,7 @@ def verify_table(
     -------
     checks : list of RowCheck
         One verdict per row, in table order.
-    recomputed : dict
+    recomputed : dict of str to TableRow
         The recomputed rows (one trial each) by name.
     """
     if rows is None or header is None:
@@ -204,7 +205,7 @@ def verify_table(
     return checks, recomputed
 
 
-def _restamped(row: Mapping[str, Any], code: Mapping[str, str]) -> dict[str, Any]:
+def _restamped(row: TableRow, code: Mapping[str, str]) -> TableRow:
     """A row with the keys the current code and inputs give it (its numbers unchanged)."""
     spec = next(r for r in ablation_rows() if r.name == row["name"])
     track = resolve_tracks([spec], None)[spec.track]

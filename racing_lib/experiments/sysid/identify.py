@@ -31,10 +31,11 @@ from racing_lib.model import GRIP_MARGIN, CarModel, ModelParams, X
 from racing_lib.model.drive import Drive
 from racing_lib.model.identified import shipped_fit_path
 from racing_lib.vehicle import (
+    VehicleParams,
     axle_cornering_stiffness,
 )
 
-__all__ = ["TOLERANCES", "IdentificationResult", "identify", "main", "run"]
+__all__ = ["TOLERANCES", "IdentificationRecord", "IdentificationResult", "identify", "main", "run"]
 
 #: Relative tolerances the identification is tested against (``tests/test_sysid.py``), chosen from
 #: what the data can honestly give. The simulated car's tyres are load sensitive and share their
@@ -48,6 +49,12 @@ __all__ = ["TOLERANCES", "IdentificationResult", "identify", "main", "run"]
 #: -15.6 to -16.3 %; rear peak -15.7 to -17.6 % (``C`` at its lower bound of 1.2, see
 #: ``_fit_axle``); cornering stiffnesses within 6 %; ``I_zz`` -3 to -5.5 %; steering lag within
 #: 1.5 %.
+#: An identification as JSON (:meth:`IdentificationResult.to_dict`, the body of the shipped
+#: ``identified_params.json``): the model's parameters, the steering lag, the report's rows, the
+#: fit statistics and notes. Its values are numbers, strings, lists and nested objects, hence
+#: ``Any``.
+IdentificationRecord = dict[str, Any]
+
 TOLERANCES: dict[str, float] = {
     "C_xw": 0.10,
     "c_rr": 0.25,
@@ -64,7 +71,9 @@ TOLERANCES: dict[str, float] = {
 # --------------------------------------------------------------------------------------------------
 
 
-def _truth_params(truth: Any) -> tuple[ModelParams | None, float | None]:
+def _truth_params(
+    truth: VehicleParams | ModelParams | None,
+) -> tuple[ModelParams | None, float | None]:
     if truth is None:
         return None, None
     tp = truth if isinstance(truth, ModelParams) else ModelParams.from_vehicle(truth)
@@ -115,7 +124,12 @@ class IdentificationResult:
     n_samples: int = 0
     elapsed: float = 0.0
 
-    def car_model(self, grip_margin: float = GRIP_MARGIN, **fields: Any) -> CarModel:
+    def car_model(
+        self,
+        grip_margin: float = GRIP_MARGIN,
+        # Any: forwarded to CarModel, whose fields have different types.
+        **fields: Any,
+    ) -> CarModel:
         """The identified car as a model to plan and race with: parameters and steering lag.
 
         Parameters
@@ -182,7 +196,7 @@ class IdentificationResult:
         out.append(f"{self.n_samples} control periods, identified in {self.elapsed:.1f} s.")
         return "\n".join(out)
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self) -> IdentificationRecord:
         """JSON-ready summary (parameters, steering lag, table, fit statistics)."""
         return {
             "model_params": self.params.to_dict(),
@@ -197,7 +211,7 @@ class IdentificationResult:
 def identify(
     logs: Sequence[Drive],
     known: ModelParams | None = None,
-    truth: Any = None,
+    truth: VehicleParams | ModelParams | None = None,
     derivative: Derivative = "interval",
     fit_steer_lag: bool = True,
 ) -> IdentificationResult:
@@ -336,7 +350,10 @@ _REPORT_SPEC = (
 
 
 def _report_rows(
-    fitted: ModelParams, tyres: dict[str, float], fits: dict[str, Any], truth: Any
+    fitted: ModelParams,
+    tyres: dict[str, float],
+    fits: dict[str, Any],
+    truth: VehicleParams | ModelParams | None,
 ) -> list[dict[str, Any]]:
     """One row per identified parameter: fitted and true value, error (%), fit quality.
 
@@ -417,8 +434,6 @@ def run(seed: int = 0, fast: bool | None = None, out: str | None = None) -> Iden
     out : str, optional
         Output path (default: the package's ``data/identified_params.json``); ``""`` writes nothing.
     """
-    from racing_lib.vehicle import VehicleParams
-
     t0 = time.perf_counter()
     logs = collect_logs(seed=seed, fast=fast)
     t_collect = time.perf_counter() - t0

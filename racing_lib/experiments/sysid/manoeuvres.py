@@ -10,9 +10,14 @@ from typing import Any
 import numpy as np
 
 from racing_lib.config import fast_mode
+from racing_lib.control.nominal import NominalController, NominalSettings
 from racing_lib.errors import ModelError
+from racing_lib.geometry import FrenetTracker, Path, Track
 from racing_lib.interfaces import Plant
 from racing_lib.model.drive import Drive
+from racing_lib.planning.speed import speed_profile
+from racing_lib.sim import SimulatedCar
+from racing_lib.tracks import load_track
 from racing_lib.vehicle import VehicleParams
 
 __all__ = [
@@ -81,13 +86,8 @@ def _record(
 # --------------------------------------------------------------------------------------------------
 
 
-def _proving_ground(radius: float, width: float, name: str) -> Any:
+def _proving_ground(radius: float, width: float, name: str) -> Track:
     """A flat, open circular test area of the given centre-line radius and total width (m)."""
-    from racing_lib.geometry import (
-        Path,
-        Track,
-    )
-
     n = max(int(2.0 * math.pi * radius / 5.0), 64)
     a = np.linspace(0.0, 2.0 * math.pi, n, endpoint=False)
     return Track(
@@ -130,9 +130,7 @@ class _SimulatedCarAt:
     def __init__(self, params: VehicleParams) -> None:
         self.params = params
 
-    def __call__(self, track: Any, start_speed: float) -> Plant:
-        from racing_lib.sim import SimulatedCar
-
+    def __call__(self, track: Track, start_speed: float) -> Plant:
         return SimulatedCar(track, self.params, dt=0.1, start_s=0.0, start_speed=start_speed)
 
 
@@ -166,10 +164,8 @@ def _start(car: CarUnderTest, track: Any, start_speed: float, seed: int | None) 
     return plant, plant.reset(seed=seed)
 
 
-def _follower(track: Any) -> Any:
+def _follower(track: Track) -> NominalController:
     """Pure-pursuit steering along the track's centre line (speed is commanded separately)."""
-    from racing_lib.control.nominal import NominalController
-
     return NominalController(track.centerline, speed=10.0)
 
 
@@ -387,11 +383,6 @@ def lap_logs(
     the centre line; ``scalings`` are fractions of the quasi-steady-state speed profile of
     :func:`racing_lib.planning.speed.speed_profile`, m/s.
     """
-    from racing_lib.control.nominal import NominalController, NominalSettings
-    from racing_lib.geometry import FrenetTracker
-    from racing_lib.planning.speed import speed_profile
-    from racing_lib.tracks import load_track
-
     spec = _as_car(car)
     vp = spec.known
     logs = []
