@@ -91,7 +91,7 @@ _NEEDED = ("l", "w", "m", "a", "b", "I_z", "h_s", "R_w", "I_y_w", "T_sb", "T_se"
 _SPIN_BETA = 0.5 * math.pi  # rad: a slip angle beyond this means the car travels backwards
 
 
-def vehicle_parameters(vehicle: int | Any) -> Any:
+def vehicle_parameters(vehicle: int | VehicleParameters) -> VehicleParameters:
     """A CommonRoad parameter set, checked to hold what the ``std`` model needs.
 
     Parameters
@@ -126,7 +126,7 @@ def vehicle_parameters(vehicle: int | Any) -> Any:
     return p
 
 
-def data_sheet(vehicle: int | Any) -> ModelParams:
+def data_sheet(vehicle: int | VehicleParameters) -> ModelParams:
     """What a team would write down for a CommonRoad car before testing it, as `ModelParams`.
 
     Mass, axle distances, yaw inertia and the height of the sprung mass (the package's load
@@ -542,7 +542,7 @@ class CommonRoadCar:
             self._k * self.dt, x[0], x[1], x[4], v * math.cos(beta), v * math.sin(beta), x[5]
         )
 
-    def state_info(self) -> dict[str, Any]:
+    def state_info(self) -> dict[str, float | int | bool]:
         """Internal quantities for logs; not part of the `Plant` protocol.
 
         Returns

@@ -23,9 +23,18 @@ Input (2): steering-angle velocity (rad/s), longitudinal acceleration (m/s^2).
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING
 
-__all__ = ["N_INPUT", "N_STATE", "std_vector_field"]
+import casadi as ca
+
+if TYPE_CHECKING:  # the optional extra's parameter class, named for the signatures only
+    from vehiclemodels.vehicle_parameters import VehicleParameters
+
+#: A value of the transcription: a CasADi expression (it is built on SX symbols and compiled),
+#: or a float where a parameter or a constant enters.
+Expr = ca.SX | ca.MX | ca.DM | float
+
+__all__ = ["N_INPUT", "N_STATE", "Expr", "std_vector_field"]
 
 #: Number of states of the ``std`` model.
 N_STATE = 9
@@ -37,14 +46,14 @@ V_S, V_B = 0.2, 0.05  # m/s: centre and width of the blend to the kinematic mode
 V_MIN = V_S / 2  # m/s: below this speed the slip angles are zero
 
 
-def steering_constraints(steering_angle: Any, steering_velocity: Any, p: Any) -> Any:
+def steering_constraints(
+    steering_angle: Expr, steering_velocity: Expr, p: VehicleParameters
+) -> Expr:
     """Transcription of ``vehiclemodels.utils.steering_constraints.steering_constraints``.
 
     The steering-angle velocity (rad/s) clipped to ``[p.v_min, p.v_max]``, and zero when the
     angle (rad) is at a limit ``p.min``/``p.max`` and the velocity points beyond it.
     """
-    import casadi as ca
-
     at_limit = ca.logic_or(
         ca.logic_and(steering_angle <= p.min, steering_velocity <= 0),
         ca.logic_and(steering_angle >= p.max, steering_velocity >= 0),
@@ -57,15 +66,13 @@ def steering_constraints(steering_angle: Any, steering_velocity: Any, p: Any) ->
     return ca.if_else(at_limit, 0, clipped)
 
 
-def acceleration_constraints(velocity: Any, acceleration: Any, p: Any) -> Any:
+def acceleration_constraints(velocity: Expr, acceleration: Expr, p: VehicleParameters) -> Expr:
     """Transcription of ``vehiclemodels.utils.acceleration_constraints.acceleration_constraints``.
 
     The acceleration (m/s^2) clipped to ``[-p.a_max, a_pos]`` with the power limit
     ``a_pos = p.a_max p.v_switch / v`` above ``p.v_switch`` (``p.a_max`` below), and zero beyond
     the speed limits ``p.v_min``/``p.v_max`` (m/s) when it points beyond them.
     """
-    import casadi as ca
-
     pos_limit = ca.if_else(velocity > p.v_switch, p.a_max * p.v_switch / velocity, p.a_max)
     at_limit = ca.logic_or(
         ca.logic_and(velocity <= p.v_min, acceleration <= 0),
@@ -79,17 +86,13 @@ def acceleration_constraints(velocity: Any, acceleration: Any, p: Any) -> Any:
     return ca.if_else(at_limit, 0, clipped)
 
 
-def _magic(b: Any, e: Any, z: Any) -> Any:
+def _magic(b: Expr, e: Expr, z: Expr) -> Expr:
     """``atan(B z - E (B z - atan(B z)))``, the core of every Pacejka formula of the package."""
-    import casadi as ca
-
     return ca.atan(b * z - e * (b * z - ca.atan(b * z)))
 
 
-def formula_longitudinal(kappa: Any, f_z: Any, t: Any) -> Any:
+def formula_longitudinal(kappa: Expr, f_z: Expr, t: Expr) -> Expr:
     """Transcription of ``tire_model.formula_longitudinal`` at camber 0: pure-slip F_x, N."""
-    import casadi as ca
-
     kappa = -kappa
     s_hx = t.p_hx1
     s_vx = f_z * t.p_vx1
@@ -104,10 +107,8 @@ def formula_longitudinal(kappa: Any, f_z: Any, t: Any) -> Any:
     return d_x * ca.sin(c_x * _magic(b_x, e_x, kappa_x) + s_vx)
 
 
-def formula_lateral(alpha: Any, f_z: Any, t: Any) -> tuple[Any, Any]:
+def formula_lateral(alpha: Expr, f_z: Expr, t: Expr) -> tuple[Expr, Expr]:
     """Transcription of ``tire_model.formula_lateral`` at camber 0: (pure-slip F_y in N, mu_y)."""
-    import casadi as ca
-
     # sign(gamma) = 0 at camber 0: the shifts S_hy and S_vy vanish (as +0.0 and +-0.0).
     s_hy = 0 * (t.p_hy1 + t.p_hy3 * 0)
     s_vy = 0 * f_z * (t.p_vy1 + t.p_vy3 * 0)
@@ -122,10 +123,8 @@ def formula_lateral(alpha: Any, f_z: Any, t: Any) -> tuple[Any, Any]:
     return f_y, mu_y
 
 
-def formula_longitudinal_comb(kappa: Any, alpha: Any, f0_x: Any, t: Any) -> Any:
+def formula_longitudinal_comb(kappa: Expr, alpha: Expr, f0_x: Expr, t: Expr) -> Expr:
     """Transcription of ``tire_model.formula_longitudinal_comb``: combined-slip F_x, N."""
-    import casadi as ca
-
     s_hxalpha = t.r_hx1
     alpha_s = alpha + s_hxalpha
     b_xalpha = t.r_bx1 * ca.cos(ca.atan(t.r_bx2 * kappa))
@@ -135,10 +134,10 @@ def formula_longitudinal_comb(kappa: Any, alpha: Any, f0_x: Any, t: Any) -> Any:
     return d_xalpha * ca.cos(c_xalpha * _magic(b_xalpha, e_xalpha, alpha_s))
 
 
-def formula_lateral_comb(kappa: Any, alpha: Any, mu_y: Any, f_z: Any, f0_y: Any, t: Any) -> Any:
+def formula_lateral_comb(
+    kappa: Expr, alpha: Expr, mu_y: Expr, f_z: Expr, f0_y: Expr, t: Expr
+) -> Expr:
     """Transcription of ``tire_model.formula_lateral_comb`` at camber 0: combined-slip F_y, N."""
-    import casadi as ca
-
     s_hykappa = t.r_hy1
     kappa_s = kappa + s_hykappa
     b_ykappa = t.r_by1 * ca.cos(ca.atan(t.r_by2 * (alpha - t.r_by3)))
@@ -150,21 +149,19 @@ def formula_lateral_comb(kappa: Any, alpha: Any, mu_y: Any, f_z: Any, f0_y: Any,
     return d_ykappa * ca.cos(c_ykappa * _magic(b_ykappa, e_ykappa, kappa_s)) + s_vykappa
 
 
-def _kinematic(x: list[Any], u: list[Any], p: Any) -> tuple[Any, Any]:
+def _kinematic(x: list[Expr], u: list[Expr], p: VehicleParameters) -> tuple[Expr, Expr]:
     """(dv, dpsi) of ``vehicle_dynamics_ks_cog`` (the kinematic model about the CoG), transcribed.
 
     The function re-applies the acceleration constraints to an input that already meets them,
     as the package's does (its steering output, f[2], is not used by ``std``).
     """
-    import casadi as ca
-
     l_wb = p.a + p.b
     u1 = acceleration_constraints(x[3], u[1], p.longitudinal)
     beta = ca.atan(ca.tan(x[2]) * p.b / l_wb)
     return u1, x[3] * ca.cos(beta) * ca.tan(x[2]) / l_wb
 
 
-def std_vector_field(x: list[Any], u_init: list[Any], p: Any) -> list[Any]:
+def std_vector_field(x: list[Expr], u_init: list[Expr], p: VehicleParameters) -> list[Expr]:
     """The right-hand side of CommonRoad's ``std`` model, on CasADi symbols.
 
     Transcribes ``vehiclemodels.vehicle_dynamics_std.vehicle_dynamics_std`` (version 2020a, as
@@ -185,8 +182,6 @@ def std_vector_field(x: list[Any], u_init: list[Any], p: Any) -> list[Any]:
     list of 9 casadi.SX
         The time derivative of the state.
     """
-    import casadi as ca
-
     lf, lr, lwb, m, inertia = p.a, p.b, p.a + p.b, p.m, p.I_z
     delta, v, psi, r, beta, om_f, om_r = x[2], x[3], x[4], x[5], x[6], x[7], x[8]
     u = [
