@@ -429,6 +429,22 @@ def test_time_limit():
     assert time.perf_counter() - tic < 3.0
 
 
+def test_a_check_runs_on_one_blas_thread():
+    """Whatever the notebook's BLAS set-up, a check's body sees one thread (two OpenBLAS
+    threads on a busy two-core machine made exercise 3.4's own solution ten times slower)."""
+    from threadpoolctl import threadpool_info, threadpool_limits
+
+    seen: list[int] = []
+
+    def body() -> str:
+        seen.extend(p["num_threads"] for p in threadpool_info() if p["user_api"] == "blas")
+        return "done"
+
+    with threadpool_limits(limits=2, user_api="blas"):
+        assert grader.grade("0.0 threads", body).status == "correct"
+    assert seen and set(seen) == {1}
+
+
 def test_score_weights_correct_answers_only():
     ok = grader.CheckResult("1", grader.CORRECT, "", weight=2.0)
     bad = grader.CheckResult("2", "wrong", "", weight=1.0)
