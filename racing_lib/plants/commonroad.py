@@ -57,7 +57,7 @@ random states, ``tests/test_plants.py``), compiled to machine code by :mod:`raci
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -68,6 +68,9 @@ from racing_lib.jit import BufferedFunction, compiled_or_interpreted
 from racing_lib.model import ModelParams, PedalMap
 from racing_lib.plants.std import N_STATE, V_B, V_MIN, V_S, std_vector_field
 from racing_lib.vehicle.contact import TrackTables, WallContact, wheels_beyond_edge
+
+if TYPE_CHECKING:  # the optional extra, imported by the functions that need it
+    from vehiclemodels.vehicle_parameters import VehicleParameters
 from racing_lib.vehicle.params import VehicleParams
 
 try:
@@ -285,7 +288,7 @@ class CommonRoadCar:
     def __init__(
         self,
         track: Track,
-        vehicle: int | Any = 2,
+        vehicle: int | VehicleParameters = 2,
         dt: float = 0.1,
         start_s: float = 0.0,
         start_speed: float = 20.0,
@@ -594,7 +597,7 @@ class CommonRoadAt:
         Further keyword arguments of :class:`CommonRoadCar` (``engine``, ``steer_tau``, ...).
     """
 
-    def __init__(self, vehicle: int | Any = 2, **options: Any) -> None:
+    def __init__(self, vehicle: int | VehicleParameters = 2, **options: Any) -> None:
         self.vehicle = vehicle
         self.options = options
 
