@@ -328,7 +328,7 @@ def test_a_row_whose_first_lap_moved_is_caught_and_one_that_did_not_passes(monke
     (as a refactor would give) or by rows with one changed bit (as a real change would)."""
     from racing_lib.experiments.ablation import verify
 
-    data = ablation_table._read_shipped()
+    data = ablation_table.shipped_table_file()
     rows = data["rows"]
     header = {k: v for k, v in data.items() if k != "rows"}
     header = {**header, "provenance": {**header["provenance"], "blas": verify.blas_kernel()}}
@@ -368,7 +368,7 @@ def test_a_row_whose_first_lap_moved_is_caught_and_one_that_did_not_passes(monke
 
 
 def test_the_shipped_table_is_full_and_small_or_says_how_to_make_it():
-    path = ablation_table._shipped_path()
+    path = ablation_table.shipped_table_path()
     if not path.exists():
         with pytest.raises(RacingLibError, match="generate_ablation_table"):
             shipped_table()
@@ -383,7 +383,7 @@ def test_the_shipped_table_is_full_and_small_or_says_how_to_make_it():
 def test_a_hand_edited_row_of_a_table_is_refused(table, tmp_path):
     _, rows = table
     path = tmp_path / "table.json"
-    path.write_text(ablation_table._table_text({"format": ablation_table.TABLE_FORMAT}, rows))
+    path.write_text(ablation_table.table_text({"format": ablation_table.TABLE_FORMAT}, rows))
     assert len(load_table(path)["rows"]) == len(rows)
     edited = json.loads(path.read_text())
     edited["rows"][0]["lap_time_mean_s"] -= 0.5  # a better lap time, typed in

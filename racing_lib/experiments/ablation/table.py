@@ -37,9 +37,12 @@ __all__ = [
     "generate_ablation_table",
     "load_table",
     "shipped_table",
+    "shipped_table_file",
     "shipped_table_header",
+    "shipped_table_path",
     "stale_rows",
     "table_records",
+    "table_text",
 ]
 #: Version of the table file: 2 added the provenance header and a checksum per row.
 TABLE_FORMAT = 2
@@ -130,7 +133,8 @@ def format_table(
 # The shipped table
 
 
-def _shipped_path() -> FilePath:
+def shipped_table_path() -> FilePath:
+    """Where the shipped table lives: ``racing_lib/data/ablation_table.json`` in the package."""
     return data_file(SHIPPED_TABLE_FILE)
 
 
@@ -178,11 +182,12 @@ def shipped_table_header() -> TableFile:
     Format, date, trials, wall time and ``provenance`` (the machine, BLAS kernel and package
     versions that made it, see :func:`racing_lib.provenance.environment`).
     """
-    data = _read_shipped()
+    data = shipped_table_file()
     return {k: v for k, v in data.items() if k != "rows"}
 
 
-def _read_shipped() -> TableFile:
+def shipped_table_file() -> TableFile:
+    """The shipped table's whole file (header and rows), checked (see :func:`load_table`)."""
     ref = data_file(SHIPPED_TABLE_FILE)
     if not ref.is_file():
         raise RacingLibError(
@@ -205,7 +210,7 @@ def shipped_table() -> list[TableRow]:
     RacingLibError
         No table is shipped yet (make it with :func:`generate_ablation_table`).
     """
-    return _read_shipped()["rows"]
+    return shipped_table_file()["rows"]
 
 
 def stale_rows(rows: Iterable[TableRow], tracks: Mapping[str, Track] | None = None) -> list[str]:
@@ -240,7 +245,7 @@ def _row_digest(row: TableRow) -> str:
     ).hexdigest()
 
 
-def _table_text(header: TableFile, rows: Sequence[TableRow]) -> str:
+def table_text(header: TableFile, rows: Sequence[TableRow]) -> str:
     """JSON with one row per line: small diffs when a row changes, still one JSON object.
 
     Each row carries the checksum of its own numbers, so that :func:`load_table` refuses a row
@@ -286,7 +291,7 @@ def generate_ablation_table(
     RacingLibError
         Fast mode is on and the target is the shipped file (the shipped table is full-mode).
     """
-    path = FilePath(target) if target is not None else _shipped_path()
+    path = FilePath(target) if target is not None else shipped_table_path()
     if fast_mode() and target is None:
         raise RacingLibError(
             "generate_ablation_table writes the shipped full-mode table, but fast mode is on "
@@ -304,5 +309,5 @@ def generate_ablation_table(
         "workers": workers,
         "wall_time_s": round(time.perf_counter() - tic, 1),
     }
-    atomic_write_text(path, _table_text(header, rows))
+    atomic_write_text(path, table_text(header, rows))
     return rows

@@ -37,11 +37,11 @@ from racing_lib.experiments.ablation.rows import TableRow, ablation_rows
 from racing_lib.experiments.ablation.runner import resolve_tracks, run_ablation
 from racing_lib.experiments.ablation.table import (
     TableFile,
-    _read_shipped,
-    _shipped_path,
-    _table_text,
     load_table,
+    shipped_table_file,
+    shipped_table_path,
     stale_rows,
+    table_text,
 )
 from racing_lib.experiments.configs import tuned_weights
 from racing_lib.io import atomic_write_text
@@ -166,7 +166,7 @@ def verify_table(
         The recomputed rows (one trial each) by name.
     """
     if rows is None or header is None:
-        data = _read_shipped()
+        data = shipped_table_file()
         rows = data["rows"] if rows is None else rows
         header = {k: v for k, v in data.items() if k != "rows"} if header is None else header
     say = log or (lambda _line: None)
@@ -245,8 +245,8 @@ def restamp_table(
     RacingLibError
         A row moved or cannot be verified on this kernel (the message names them and what to do).
     """
-    path = FilePath(target) if target is not None else _shipped_path()
-    data = _read_shipped() if target is None else load_table(path)
+    path = FilePath(target) if target is not None else shipped_table_path()
+    data = shipped_table_file() if target is None else load_table(path)
     rows = data["rows"]
     header = {k: v for k, v in data.items() if k != "rows"}
     checks, recomputed = verify_table(rows, header, workers=workers, log=log)
@@ -267,5 +267,5 @@ def restamp_table(
             recomputed.update(_recompute_first_laps(missing, {r["name"]: r for r in rows}, workers))
         probes[kernel] = {str(r["name"]): probe(recomputed[str(r["name"])]) for r in rows}
     header = {**header, "probes": probes}
-    atomic_write_text(path, _table_text(header, [_restamped(r, code) for r in rows]))
+    atomic_write_text(path, table_text(header, [_restamped(r, code) for r in rows]))
     return checks
