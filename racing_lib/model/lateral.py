@@ -47,7 +47,7 @@ def _check_speed(v_x: float) -> float:
 
 
 def lateral_linearization(
-    params: ModelParams | None = None,
+    params: ModelParams,
     v_x: float = 20.0,
     options: ModelOptions | None = None,
     accel: float = 0.0,
@@ -69,8 +69,8 @@ def lateral_linearization(
 
     Parameters
     ----------
-    params : ModelParams, optional
-        Model parameters (default ``ModelParams()``).
+    params : ModelParams
+        Model parameters.
     v_x : float
         Forward speed of the operating point, m/s (>= 2).
     options : ModelOptions, optional
@@ -103,7 +103,7 @@ def lateral_linearization(
 
 
 def understeer_gradient(
-    params: ModelParams | None = None,
+    params: ModelParams,
     v_x: float = 20.0,
     options: ModelOptions | None = None,
     accel: float = 0.0,
@@ -118,8 +118,8 @@ def understeer_gradient(
 
     Parameters
     ----------
-    params : ModelParams, optional
-        Model parameters (default ``ModelParams()``).
+    params : ModelParams
+        Model parameters.
     v_x : float
         Speed at which the gain is evaluated, m/s.
     options : ModelOptions, optional
@@ -128,7 +128,7 @@ def understeer_gradient(
         Net longitudinal acceleration, m/s^2 (with longitudinal load transfer, braking moves the
         car towards oversteer).
     """
-    p = ModelParams() if params is None else params
+    p = params
     v = _check_speed(v_x)
     sys = lateral_linearization(p, v, options, accel)
     gain = float(np.real(control.dcgain(sys))[1, 0])  # r / delta
@@ -179,7 +179,7 @@ class LateralAnalysis:
 
 
 def lateral_analysis(
-    params: ModelParams | None = None,
+    params: ModelParams,
     speeds: Sequence[float] | np.ndarray = (10.0, 20.0, 30.0, 40.0, 50.0),
     options: ModelOptions | None = None,
     accel: float = 0.0,
@@ -190,8 +190,8 @@ def lateral_analysis(
 
     Parameters
     ----------
-    params : ModelParams, optional
-        Model parameters (default ``ModelParams()``).
+    params : ModelParams
+        Model parameters.
     speeds : sequence of float
         Forward speeds, m/s (each >= 2).
     options : ModelOptions, optional
@@ -204,7 +204,7 @@ def lateral_analysis(
     -------
     LateralAnalysis
     """
-    p = ModelParams() if params is None else params
+    p = params
     v = np.asarray(speeds, dtype=float).ravel()
     if v.size == 0:
         raise ModelError("lateral_analysis needs at least one speed (m/s).")

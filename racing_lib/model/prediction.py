@@ -228,7 +228,7 @@ def _horizon_steps(horizons: Sequence[float], dt: float) -> list[int]:
 def prediction_errors(
     log: Drive,
     track: Track,
-    params: ModelParams | None = None,
+    params: ModelParams,
     options: ModelOptions | None = None,
     horizons: Sequence[float] = (0.5, 1.0),
     *,
@@ -255,7 +255,7 @@ def prediction_errors(
         contain no wall contact: the model knows no walls.
     track : Track
         The track it was driven on.
-    params : ModelParams, optional
+    params : ModelParams
         Model parameters (e.g. :func:`racing_lib.model.identified.identified_params`).
     options : ModelOptions, optional
         Model effects (default ``ModelOptions()``).
@@ -285,7 +285,6 @@ def prediction_errors(
     ModelError
         Inconsistent log arrays, bad horizons, or no usable window.
     """
-    params = ModelParams() if params is None else params
     options = ModelOptions() if options is None else options
     t = np.asarray(log.t, dtype=float)
     steer_cmd = np.asarray(log.steer, dtype=float)
@@ -361,7 +360,7 @@ ABLATION_VARIANTS: dict[str, ModelOptions] = {
 def prediction_table(
     log: Drive,
     track: Track,
-    params: ModelParams | None = None,
+    params: ModelParams,
     variants: Mapping[str, ModelOptions] | None = None,
     horizons: Sequence[float] = (0.5, 1.0),
     **kwargs: int | float | None,
