@@ -9,11 +9,8 @@ import pytest
 
 from racing_lib.errors import PlanningError
 from racing_lib.model import identified_params
-from racing_lib.planning.curvature import (
-    CurvatureSettings,
-    solve_curvature,
-    steady_cornering,
-)
+from racing_lib.planning.curvature import solve_curvature, steady_cornering
+from racing_lib.planning.curvature_settings import CurvatureSettings
 from racing_lib.planning.grid import TrackGrid
 from racing_lib.planning.trajectory import Trajectory
 from racing_lib.tracks.segments import Arc, Straight, track_from_segments

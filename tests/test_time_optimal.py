@@ -9,7 +9,8 @@ import pytest
 
 from racing_lib.errors import PlanningError
 from racing_lib.model import ModelOptions, ModelParams, discretize, identified_params
-from racing_lib.planning.curvature import CurvatureSettings, solve_curvature
+from racing_lib.planning.curvature import solve_curvature
+from racing_lib.planning.curvature_settings import CurvatureSettings
 from racing_lib.planning.time_optimal import (
     TimeOptimalSettings,
     lap_time_with_model,

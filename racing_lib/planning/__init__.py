@@ -28,11 +28,8 @@ from racing_lib.errors import PlanningError, checked_arguments
 from racing_lib.geometry import Track
 from racing_lib.model.car_model import CarModel
 from racing_lib.model.identified import GRIP_MARGIN, identified_model
-from racing_lib.planning.curvature import (
-    CurvatureResult,
-    CurvatureSettings,
-    solve_curvature,
-)
+from racing_lib.planning.curvature import solve_curvature
+from racing_lib.planning.curvature_settings import CurvatureResult, CurvatureSettings
 from racing_lib.planning.grid import TrackGrid
 from racing_lib.planning.speed import SpeedProfile, speed_profile
 from racing_lib.planning.time_optimal import (

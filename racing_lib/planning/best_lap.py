@@ -52,13 +52,12 @@ from racing_lib.errors import PlanningError
 from racing_lib.geometry import Track
 from racing_lib.model import frenet_kinematics, identified_params
 from racing_lib.planning.grid import DEFAULT_CAR_WIDTH, TrackGrid
+from racing_lib.planning.ipopt import ipopt_solver, trapezoid_lap_time
 from racing_lib.planning.time_optimal import (
     TimeOptimalResult,
     TimeOptimalSettings,
-    ipopt_solver,
     lap_time_with_model,
     solve_time_optimal,
-    trapezoid_lap_time,
 )
 from racing_lib.planning.trajectory import Trajectory
 from racing_lib.vehicle import (

@@ -62,13 +62,10 @@ from racing_lib.geometry import Track
 from racing_lib.model import NX, X
 from racing_lib.model.car_model import CarModel
 from racing_lib.model.params import ModelOptions
-from racing_lib.planning.curvature import (
-    CurvatureResult,
-    CurvatureSettings,
-    solve_curvature,
-    steady_cornering,
-)
+from racing_lib.planning.curvature import solve_curvature, steady_cornering
+from racing_lib.planning.curvature_settings import CurvatureResult, CurvatureSettings
 from racing_lib.planning.grid import TrackGrid
+from racing_lib.planning.ipopt import ipopt_solver, option_advice
 from racing_lib.planning.speed import speed_profile
 from racing_lib.planning.time_optimal_nlp import (
     NLP_SCALE,
@@ -78,7 +75,6 @@ from racing_lib.planning.time_optimal_nlp import (
     interval_functions,
 )
 from racing_lib.planning.time_optimal_settings import (
-    IpoptSettings,
     TimeOptimalResult,
     TimeOptimalSettings,
 )
@@ -96,7 +92,6 @@ __all__ = [
 
 if TYPE_CHECKING:
     # casadi is imported where a problem is built: importing the planners stays cheap
-    import casadi as ca
 
     from racing_lib.model.params import ModelParams
 
@@ -266,7 +261,7 @@ def _failure_advice(kind: str, st: TimeOptimalSettings, status: str) -> str:
     """What to try after a failed NLP: only knobs that exist, with their command-line flags."""
     if status == "Invalid_Option":
         # Nothing was solved: another start or grid would fail the same way.
-        return _option_advice(st)
+        return option_advice(st)
     tips = []
     if kind == "warm":
         tips.append("the cold start (start='cold'; on the command line --start cold)")
@@ -285,71 +280,6 @@ def _failure_advice(kind: str, st: TimeOptimalSettings, status: str) -> str:
     )
     tips.append("a check of the friction coefficient mu of the parameter set")
     return "; ".join(tips)
-
-
-def _option_advice(st: IpoptSettings) -> str:
-    """What to check when IPOPT refuses the options of settings ``st`` (any planner's)."""
-    extra = f"ipopt_options {st.ipopt_options!r}, " if st.ipopt_options else ""
-    return (
-        f"check the IPOPT options of the settings ({extra}tol {st.tol!r}, max_iter "
-        f"{st.max_iter!r}, print_level {st.print_level!r}): an unknown name, a value out of "
-        "range or a linear solver this build lacks"
-    )
-
-
-def trapezoid_lap_time(inv_sdot: ca.SX | ca.MX, grid: TrackGrid) -> ca.SX | ca.MX:
-    """Lap time (s) from the nodes' 1/s_dot (s/m), by the trapezoid rule on the periodic grid.
-
-    ``inv_sdot`` is a CasADi row (1 x N) of the nodes' 1/s_dot; the result is of its kind.
-
-    Each node's weight is half of the two intervals (m) it touches, so the sum runs once round
-    the lap. Shared with :mod:`racing_lib.planning.best_lap`.
-    """
-    import casadi as ca
-
-    w_node = 0.5 * (grid.ds + np.roll(grid.ds, 1))
-    return ca.mtimes(inv_sdot, ca.DM(w_node))
-
-
-def ipopt_solver(
-    name: str,
-    nlp: dict[str, ca.SX | ca.MX],
-    st: IpoptSettings,
-    derivatives: dict[str, ca.Function] | None = None,
-    defaults: tuple[tuple[str, str | float], ...] = (),
-) -> ca.Function:
-    """CasADi's IPOPT ``nlpsol`` for ``nlp`` with the planners' options.
-
-    The exact Hessian (CasADi differentiates the model symbolically, so it costs little) and the
-    adaptive barrier update; ``st`` supplies ``print_level``, ``max_iter``, ``tol`` and any
-    ``ipopt_options`` that override these. ``derivatives`` may hold ready-made ``grad_f``,
-    ``jac_g`` and ``hess_lag`` functions (:class:`~racing_lib.planning.time_optimal_nlp.
-    StructuredNLP`); ``defaults`` are IPOPT options of the caller, applied before
-    ``st.ipopt_options``. Shared with :mod:`racing_lib.planning.best_lap`.
-    """
-    import casadi as ca
-
-    ipopt = {
-        "print_level": st.print_level,
-        "max_iter": st.max_iter,
-        "tol": st.tol,
-        "hessian_approximation": "exact",
-        "mu_strategy": "adaptive",
-        "sb": "yes",
-    }
-    ipopt.update(dict(defaults))
-    ipopt.update(dict(st.ipopt_options))
-    opts = {"ipopt": ipopt, "print_time": False, **(derivatives or {})}
-    try:
-        return ca.nlpsol(name, "ipopt", nlp, opts)
-    except RuntimeError as exc:
-        # CasADi checks the options as it builds the solver; its message is a long trace.
-        said = [line for line in str(exc).splitlines() if "option" in line.lower()]
-        detail = said[-1].strip() if said else str(exc).splitlines()[-1].strip()
-        raise PlanningError(
-            f"IPOPT refused the options of the {name} NLP ({detail[:200]}). Try: "
-            f"{_option_advice(st)}."
-        ) from None
 
 
 def solve_time_optimal(
