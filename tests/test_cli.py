@@ -122,3 +122,11 @@ def test_a_failed_nlp_names_ipopt_its_status_and_only_knobs_that_exist(capsys):
     assert "--max-iter 6" in line and "--spacing" in line
     # The default start is cold, so the other start is suggested, with its flag.
     assert "start='warm'" in line and "--start warm" in line and "--start cold" not in line
+
+
+def test_the_parsers_controller_names_are_the_librarys():
+    """The parser lists the controllers without importing them; the two lists must agree."""
+    from racing_lib.control import CONTROLLER_NAMES
+    from racing_lib.face import cli
+
+    assert cli.CONTROLLERS == CONTROLLER_NAMES
