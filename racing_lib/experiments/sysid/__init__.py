@@ -92,6 +92,7 @@ from racing_lib.experiments.sysid.identify import (
     main,
     run,
 )
+from racing_lib.experiments.sysid.limits import collect_logs, full_throttle_log, steering_rate_log
 from racing_lib.experiments.sysid.longitudinal import pedal_map_r2
 from racing_lib.experiments.sysid.manoeuvres import (
     MANOEUVRES,
@@ -99,12 +100,12 @@ from racing_lib.experiments.sysid.manoeuvres import (
     braking_logs,
     circle_logs,
     coast_down_log,
-    collect_logs,
     lap_logs,
     simulated_car,
     step_logs,
 )
 from racing_lib.experiments.sysid.samples import FitStats
+from racing_lib.experiments.sysid.watch import LimitEvent, ManoeuvreSettings
 
 __all__ = [
     "MANOEUVRES",
@@ -112,10 +113,13 @@ __all__ = [
     "TOLERANCES",
     "FitStats",
     "IdentificationResult",
+    "LimitEvent",
+    "ManoeuvreSettings",
     "braking_logs",
     "circle_logs",
     "coast_down_log",
     "collect_logs",
+    "full_throttle_log",
     "identify",
     "lap_logs",
     "main",
@@ -123,4 +127,5 @@ __all__ = [
     "run",
     "simulated_car",
     "step_logs",
+    "steering_rate_log",
 ]
