@@ -122,6 +122,7 @@ def _lateral_samples(kp: ModelParams, S: _Samples) -> tuple[np.ndarray, np.ndarr
             "the logs hold no steady-state circles and no steering steps (laps are not used for "
             "the tyres: wall contacts and slides would corrupt them)",
             "circles",
+            S,
         )
     if not np.any(lat) or (
         np.max(np.abs(S.steer[lat])) < 0.01 and np.max(np.abs(S.a_y[lat])) < 1.0
@@ -130,17 +131,22 @@ def _lateral_samples(kp: ModelParams, S: _Samples) -> tuple[np.ndarray, np.ndarr
             "the Pacejka tyre parameters B, C, D and the yaw inertia I_zz",
             "the logs contain no steering (|delta| < 0.01 rad and |a_y| < 1 m/s^2 throughout)",
             "circles",
+            S,
         )
     ss = lat & S.settled & (np.abs(S.dr) < 0.03) & (np.abs(S.dvy) < 0.1) & (np.abs(S.dvx) < 0.5)
     ss &= np.abs(S.a_y) > 0.3
     a_y_max = float(np.max(np.abs(S.a_y[ss]))) if np.any(ss) else 0.0
     if np.count_nonzero(ss) < 30 or a_y_max < 0.55 * mu * g:
+        circ = (S.kind == "circles") & S.valid
+        seen = float(np.max(np.abs(S.a_y[circ]))) if np.any(circ) else 0.0
         raise _missing(
             "the Pacejka tyre parameters B, C, D",
-            f"{np.count_nonzero(ss)} steady-state cornering samples reaching |a_y| = "
-            f"{a_y_max:.1f} m/s^2; the peak factor D needs >= 30 samples up to at least "
-            f"{0.55 * mu * g:.1f} m/s^2 (0.55 mu g)",
+            f"it gave {np.count_nonzero(ss)} steady-state cornering samples, reaching |a_y| = "
+            f"{a_y_max:.1f} m/s^2 (the largest lateral acceleration in control: "
+            f"{seen:.1f} m/s^2); the peak factor D needs >= 30 samples up to at least "
+            f"{0.55 * mu * g:.1f} m/s^2 (0.55 mu g of the data sheet's mu = {mu:g})",
             "circles",
+            S,
         )
     return lat, ss
 
@@ -229,6 +235,7 @@ def _fit_lag_and_inertia(
             f"only {np.count_nonzero(tr)} samples with |r_dot| > 0.2 rad/s^2 (need >= 20): the "
             "logs have no yaw transients",
             "steps",
+            S,
         )
     idx = np.flatnonzero(lat)
     Ssub = _subset(S, idx)
@@ -277,6 +284,7 @@ def _fit_inertia(kp: ModelParams, Ssub: _Samples, fyr: np.ndarray) -> float:
             "the yaw inertia I_zz",
             f"the yaw-balance fit gave a non-positive inertia ({I_zz:.3g} kg m^2)",
             "steps",
+            Ssub,
         )
     return I_zz
 

@@ -47,6 +47,7 @@ def _fit_coast_down(
             "the drag C_xw and rolling resistance c_rr",
             f"only {n} pedal-0 coast-down samples above {_V_MIN:.0f} m/s (need >= {_MIN_SAMPLES})",
             "coast-down",
+            S,
         )
     # Measured resistance: what is left of v_x_dot after the kinematic, steering and grade terms.
     y = S.dvx[cd] - S.r[cd] * S.vy[cd] + fyf_sin[cd] / kp.m + kp.g * np.sin(S.theta[cd])
@@ -59,6 +60,7 @@ def _fit_coast_down(
             f"the coast-down speed only spans {np.min(v):.1f}-{np.max(v):.1f} m/s: at "
             "near-constant speed drag (v^2) and rolling resistance (constant) cannot be told apart",
             "coast-down",
+            S,
         )
     A = np.column_stack(
         [
@@ -66,7 +68,7 @@ def _fit_coast_down(
             -rolling_resistance(kp.m * kp.g * np.cos(S.theta[cd]), 1.0) / kp.m,  # per unit c_rr
         ]
     )
-    cond = _check_regressor(A, ["v_x^2 (drag)", "1 (rolling)"], "C_xw and c_rr", "coast-down")
+    cond = _check_regressor(A, ["v_x^2 (drag)", "1 (rolling)"], "C_xw and c_rr", "coast-down", S)
     coef, *_ = np.linalg.lstsq(A, y, rcond=None)
     e = y - A @ coef
     # Engine braking check: a powertrain that drags at pedal 0 adds a deceleration growing with
@@ -181,6 +183,7 @@ def _fit_pedal(
             f"{thr} throttle samples (u_p > 0.2) and {brk} brake samples (u_p < -0.2); each "
             "needs >= 20",
             "steps",
+            S,
         )
     idx = np.flatnonzero(use)
     Su = _subset(S, idx)
@@ -188,7 +191,7 @@ def _fit_pedal(
     v_corner = _best_corner_speed(Su, y)
     A = _pedal_regressor(Su, v_corner)
     names = ["1", "v_x", "max(u_p, 0) (power-limited)", "min(u_p, 0)"]
-    cond = _check_regressor(A, names, "the pedal map", "steps")
+    cond = _check_regressor(A, names, "the pedal map", "steps", S)
     # Hold out every fifth block of 50 periods (5 s) to judge the map on data it was not fit to.
     test = (np.arange(idx.size) // 50) % 5 == 4
     coef_train, *_ = np.linalg.lstsq(A[~test], y[~test], rcond=None)
@@ -201,6 +204,7 @@ def _fit_pedal(
             f"the fitted throttle/brake slopes ({coef[2]:.3g}, {coef[3]:.3g} m/s^2) are not both "
             "positive",
             "steps",
+            S,
         )
     m_xi = np.zeros(len(X))
     m_xi[X.VX] = coef[1]  # only the speed drives the powertrain; other states would fit noise
@@ -231,15 +235,23 @@ def _fit_brake_limit(kp: ModelParams, S: _Samples, fyf_sin: np.ndarray) -> tuple
     """
     idx = np.flatnonzero(_full_brake(S) & S.valid & (S.vx > 10.0))
     if idx.size < _MIN_SAMPLES:
+        ran = np.any(S.kind == "braking")
+        todo = (
+            "higher start speeds (braking_logs(speeds=...)) give more samples"
+            if ran
+            else "add the 'braking' manoeuvre to bound a_min by the tyres"
+        )
         return None, (
             f"no braking limit: {idx.size} full-brake samples above 10 m/s (need >= "
-            f"{_MIN_SAMPLES}); add the 'braking' manoeuvre to bound a_min by the tyres"
+            f"{_MIN_SAMPLES}); {todo}"
         )
     decel = -_tyre_ax(kp, _subset(S, idx), fyf_sin[idx])
     limit = float(np.median(decel))
     spread = float(np.percentile(decel, 90) - np.percentile(decel, 10))
+    pedal = float(np.max(S.pedal[idx]))
+    held = "" if pedal <= -0.999 else f" at pedal {pedal:.2f} or harder (backed off from lock-up)"
     return limit, (
-        f"braking limit {limit:.2f} m/s^2 from {idx.size} full-brake samples "
+        f"braking limit {limit:.2f} m/s^2 from {idx.size} full-brake samples{held} "
         f"(10-90 % spread {spread:.2f} m/s^2)"
     )
 

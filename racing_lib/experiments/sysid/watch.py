@@ -88,7 +88,7 @@ class ManoeuvreSettings:
     speed_backoff: float = 0.9
     min_throttle: float = 0.05
     min_brake: float = 0.5
-    yaw_damping: float = 0.7
+    yaw_damping: float = 1.5
     max_trips: int = 2
     steer_rate_speed: float = 10.0
     steer_rate_ay: float = 0.3
