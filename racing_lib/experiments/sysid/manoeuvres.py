@@ -213,6 +213,7 @@ def _watch(
     dt: float,
     slow_down: bool = False,
     yaw_extra: float = 0.0,
+    watch_yaw: bool = True,
 ) -> _Watchdog:
     """The watchdog of one run: ``settings`` (default ones), path curvature (1/m), period (s)."""
     known = _as_car(car).known
@@ -222,6 +223,8 @@ def _watch(
         dt,
         yaw_extra=yaw_extra,
         wheelbase=float(known.l_f + known.l_r),
+        l_r=float(known.l_r),
+        watch_yaw=watch_yaw,
         slow_down=slow_down,
     )
 
@@ -272,6 +275,8 @@ def coast_down_log(
     phase = {"coast": False}
     watch = _watch(car, settings, 1.0 / 1500.0, plant.dt, slow_down=True)
 
+    coast: list[float] = []  # speeds since the coast began
+
     def policy(obs: Any, k: int) -> tuple[float, float]:
         if obs.vx >= min(v_high, watch.v_cap - 0.5):
             phase["coast"] = True
@@ -284,8 +289,18 @@ def coast_down_log(
         6000,
         f"coast-down {v_high:.0f}->{v_low:.0f} m/s",
         "coast-down",
-        stop=lambda o: phase["coast"] and o.vx < v_low,
+        stop=lambda o: phase["coast"] and (o.vx < v_low or _coasts_on(o, coast)),
     )
+
+
+def _coasts_on(obs: Any, speeds: list[float], window: int = 200) -> bool:
+    """Whether a coasting car kept its speed: it lost less than 0.1 m/s in ``window`` periods.
+
+    ``speeds`` (m/s) collects the coast's speeds. A car without drag nor rolling resistance never
+    reaches ``v_low``; 20 s at constant speed tell all there is (the resistances are 0).
+    """
+    speeds.append(float(obs.vx))
+    return len(speeds) > window and speeds[-window - 1] - speeds[-1] < 0.1
 
 
 def braking_logs(
@@ -501,8 +516,8 @@ def lap_logs(
 
     As in the paper, a simple nominal controller (pure pursuit + speed PI) drives the car along
     the centre line; ``scalings`` are fractions of the quasi-steady-state speed profile of
-    :func:`racing_lib.planning.speed.speed_profile`, m/s. The pedal is watched for side slip and
-    for a yaw rate off the centre line's ``v_x kappa(s)``
+    :func:`racing_lib.planning.speed.speed_profile`, m/s. The pedal is watched for side slip
+    beyond the kinematic slip of the centre line's curvature
     (:class:`~racing_lib.experiments.sysid.watch.ManoeuvreSettings`).
     """
     spec = _as_car(car)
@@ -527,10 +542,9 @@ def lap_logs(
             def grade(x: float, y: float, tracker=tracker, track=track) -> float:
                 return float(track.grade(tracker.project(x, y)[0]))
 
-            # Pure pursuit cuts a real track's corners: its yaw rate strays further from the
-            # centre line's than on a circle, hence a band twice as wide.
-            st = settings or ManoeuvreSettings()
-            watch = _watch(spec, st, 0.0, plant.dt, True, st.yaw_limit)
+            # The yaw rate is not judged (pure pursuit cuts the corners and scrapes the walls);
+            # the path's curvature sets the body-slip band and the yaw damper.
+            watch = _watch(spec, settings, 0.0, plant.dt, True, watch_yaw=False)
             follow = FrenetTracker(track.centerline)
 
             def policy(obs: Any, k: int, ctrl=ctrl, w=watch, f=follow, track=track):

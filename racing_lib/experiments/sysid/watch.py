@@ -39,7 +39,8 @@ class ManoeuvreSettings:
     ----------
     slip_limit : float
         Body slip ``|v_y| / v_x`` (about the side-slip angle, rad) beyond which the car is losing
-        grip. The fits drop samples beyond 0.1 anyway.
+        grip, on top of the kinematic body slip ``l_r |kappa|`` of the path (a tight hairpin at
+        walking pace has that much without any tyre slip). The fits drop samples beyond 0.1.
     yaw_limit : float
         Yaw-rate deviation from the path's steady state ``v_x kappa``, rad/s, beyond which the car
         is rotating away from the circle it follows (oversteer: spinning or locked rear wheels).
@@ -138,6 +139,11 @@ class _Watchdog:
         their speed levels and back off by level instead.
     wheelbase : float
         ``l_f + l_r`` of the car, m (for the yaw damper; 0: no damper).
+    l_r : float
+        Distance from the centre of gravity to the rear axle, m (the kinematic body slip).
+    watch_yaw : bool
+        Whether to judge the yaw rate (laps do not: pure pursuit cuts a track's corners and
+        scrapes its walls, so the yaw rate strays from the centre line's by design).
     yaw_extra : float
         Widens the yaw-rate band by this much, rad/s: the yaw rate a manoeuvre's own steering
         steps add to the path's.
@@ -148,6 +154,8 @@ class _Watchdog:
     dt: float
     yaw_extra: float = 0.0
     wheelbase: float = 0.0
+    l_r: float = 0.0
+    watch_yaw: bool = True
     slow_down: bool = False
     v_cap: float = math.inf
     events: list[LimitEvent] = field(default_factory=list)
@@ -164,9 +172,10 @@ class _Watchdog:
             return None
         s = self.settings
         slip = abs(obs.vy) / obs.vx
-        if slip > s.slip_limit:
-            return f"body slip |v_y|/v_x = {slip:.3f} > {s.slip_limit:g}"
-        if self.kappa is not None:
+        band = s.slip_limit + (self.l_r * abs(self.kappa) if self.kappa is not None else 0.0)
+        if slip > band:
+            return f"body slip |v_y|/v_x = {slip:.3f} > {band:.3f}"
+        if self.kappa is not None and self.watch_yaw:
             dev = abs(obs.r - obs.vx * self.kappa)
             if dev > s.yaw_limit + self.yaw_extra:
                 return f"yaw rate {obs.r:+.3f} rad/s is {dev:.3f} from the path's steady state"
