@@ -271,3 +271,119 @@ def test_lagged_steering_is_the_analytic_first_order_response():
     assert eff[0] == 0.0
     np.testing.assert_array_equal(lagged_steering(np.full(4, 0.2), tau, dt), np.full(4, 0.2))
     np.testing.assert_array_equal(lagged_steering(np.arange(3.0), 0.0, dt), np.arange(3.0))
+
+
+# ------------------------------------------------------------- limits, watchdog and helpful errors
+
+
+class _Rigged:
+    """A plant rigged to lose the car: it yaws away whatever it is told, then spins or breaks.
+
+    ``fail="spin"`` raises a PlantError once the body slip passes 90 degrees (as CommonRoadCar
+    does); ``fail="nan"`` returns NaN from step ``nan_at`` on.
+    """
+
+    dt = 0.1
+
+    def __init__(self, track, start_speed, fail="spin", nan_at=5):
+        self.v, self.fail, self.nan_at = float(start_speed), fail, nan_at
+
+    def reset(self, seed=None):
+        self.k, self.beta = 0, 0.0
+        return self._obs()
+
+    def _obs(self):
+        from racing_lib.interfaces import Observation
+
+        t = self.k * self.dt
+        v = self.v
+        bad = self.fail == "nan" and self.k >= self.nan_at
+        vy = math.nan if bad else v * math.sin(self.beta)
+        return Observation(t, 0.0, 0.0, 0.0, v * math.cos(self.beta), vy, 0.5 * self.k * self.dt)
+
+    def step(self, steer_rad, pedal):
+        from racing_lib.errors import PlantError
+
+        self.k += 1
+        self.beta += 0.1  # it slides away, whatever the driver does
+        if self.fail == "spin" and self.beta > math.pi / 2:
+            raise PlantError("rigged car: it spun (slip angle beyond 90 degrees).")
+        return self._obs()
+
+
+def test_a_car_that_spins_is_one_plant_error_naming_the_manoeuvre():
+    from racing_lib.errors import PlantError
+    from racing_lib.experiments.sysid import CarUnderTest, circle_logs
+
+    car = CarUnderTest(lambda track, v: _Rigged(track, v, "spin"), VehicleParams())
+    with pytest.raises(PlantError, match=r"the 'circles' manoeuvre \(circle R=40 m\) lost") as e:
+        circle_logs(car, radii=(40.0,), levels=2, hold=4.0)
+    assert "spun" in str(e.value) and "Try" in str(e.value)
+
+
+def test_a_plant_that_returns_nan_is_one_plant_error_naming_the_manoeuvre():
+    from racing_lib.errors import PlantError
+    from racing_lib.experiments.sysid import CarUnderTest, coast_down_log
+
+    car = CarUnderTest(lambda track, v: _Rigged(track, v, "nan"), VehicleParams())
+    with pytest.raises(PlantError, match="'coast-down' manoeuvre .* non-finite observation"):
+        coast_down_log(car)
+
+
+def test_a_manoeuvre_that_ran_short_is_not_asked_for_again(logs):
+    # Circles cut after their first two levels (below 0.55 mu g): the message says that the
+    # circles ran, what they reached, and what to change; it does not ask to add them.
+    short = [_truncate(log, 70) if log.kind == "circles" else log for log in logs]
+    with pytest.raises(ModelError, match="'circles' manoeuvre ran") as info:
+        identify(short)
+    msg = str(info.value)
+    assert "Add the" not in msg and "reaching |a_y| =" in msg and "circle_logs(radii=" in msg
+
+
+@pytest.mark.slow
+def test_the_simulated_car_never_trips_the_watchdog(monkeypatch):
+    # The watchdog changes nothing until it meets a limit; the simulated car, in its normal
+    # manoeuvres, must never meet one (so its shipped identification stays what it was).
+    from racing_lib.experiments.sysid import watch
+
+    trips = []
+    monkeypatch.setattr(watch._Watchdog, "_trip", lambda self, obs, why: trips.append(why))
+    collect_logs(seed=SEED, fast=True)
+    assert trips == []
+
+
+def test_the_watchdog_lifts_then_caps_the_throttle():
+    from racing_lib.experiments.sysid.watch import ManoeuvreSettings, _Watchdog
+    from racing_lib.interfaces import Observation
+
+    st = ManoeuvreSettings()
+    w = _Watchdog(st, kappa=0.01, dt=0.1, wheelbase=2.5)
+    calm = Observation(2.0, 0.0, 0.0, 0.0, 20.0, 0.0, 0.2)  # r = v kappa: the steady state
+    for _ in range(int(st.settle / 0.1) + 1):  # the first second is not judged
+        assert w(calm, 0.8) == 0.8 and w.steer(calm, 0.05) == 0.05  # untouched: no limit met
+    spin = Observation(2.1, 0.0, 0.0, 0.0, 20.0, -0.5, 0.5)
+    assert w(spin, 1.0) == 0.0  # off both pedals while out of the bands
+    assert w.events and w.events[0].pedal == 0.8 and w.events[0].a_y == pytest.approx(4.0)
+    for _ in range(int(st.recovery / 0.1) + 1):
+        w(calm, 1.0)
+    out = w(calm, 1.0)
+    assert 0.0 < out <= st.backoff * 0.8  # capped below the throttle that broke traction
+    assert w.steer(spin, 0.05) < 0.05  # the yaw damper counter-steers the excess yaw
+
+
+def test_rate_limited_steering_ramps_at_the_rate():
+    from racing_lib.experiments.sysid.lateral import rate_limited_steering
+
+    cmd = np.r_[0.0, np.full(20, 0.4)]
+    delta = rate_limited_steering(cmd, tau=0.01, rate_max=0.5)
+    # A ramp at 0.5 rad/s: the mean angle over period k (after the step) is 0.5 (k - 0.5) dt.
+    np.testing.assert_allclose(delta[1:6], 0.05 * (np.arange(1, 6) - 0.5), atol=2e-3)
+    assert delta[-1] == pytest.approx(0.4, abs=1e-6)
+
+
+def test_the_simulated_cars_actuator_limits_are_identified(result):
+    # Steering rate 1.2 rad/s and 52.3 W/kg at the wheels (seed 7, fast data: +6 %, -2 %).
+    assert result.steer_rate_max == pytest.approx(VehicleParams().steer_rate_max, rel=0.15)
+    assert abs(result.errors()["p_thr (full throttle)"]) < 0.05
+    assert result.success
+    assert result.car_model().steer_rate_max == result.steer_rate_max

@@ -36,6 +36,30 @@ Identified, in this order (each step uses the ones before it):
    against ``[1, v_x, max(u_p, 0), min(u_p, 0)]`` by linear least squares
    (:class:`~racing_lib.model.PedalMap`).
 
+5. **Actuator limits** (their own manoeuvres, which feed none of the fits above): the steering
+   rate limit from large steering steps at low speed (a one-parameter search on the lateral
+   balance with a rate-limited lag), and the power per mass and top speed from a full-throttle
+   run (``a_x v_x`` on its power-limited plateau). They reach
+   :meth:`IdentificationResult.car_model` (``steer_rate_max``; ``steer_max`` from the data sheet
+   via ``identify(steer_max=...)``), and the pedal map's power limit when the map's own data
+   never ran out of power.
+
+A car nobody here wrote. The manoeuvres drive with a watchdog
+(:mod:`~racing_lib.experiments.sysid.watch`, :class:`ManoeuvreSettings`): a car that leaves the
+steady state its manoeuvre holds (yaw rate off the path's ``v_x kappa``, or body slip beyond a
+bound: wheel spin under throttle, locked wheels under a brake, tyres weaker than the data sheet)
+gets its throttle lifted and then capped, its brake released and re-applied lighter, a yaw damper
+on its steering and, in the circles, a speed that stops rising at the level it could hold.
+Nothing changes until a limit is met, and the simulated car meets none in its manoeuvres: its
+logs, hence its shipped identification, are bit for bit what they were. CommonRoad's vehicles
+1-3 (:mod:`racing_lib.plants.commonroad`: no drag, no ABS, a 0.4 rad/s steering rate limit, a
+governed top speed) are identified with the same settings (``tests/test_foreign_plant.py``). A
+car that is lost anyway stops the run with one :class:`~racing_lib.errors.PlantError` naming the
+manoeuvre and what to change; data that cannot determine a parameter raise a
+:class:`~racing_lib.errors.ModelError` that says which manoeuvre ran, what it reached, and what to
+change (or which manoeuvre to add, if it did not run). :attr:`IdentificationResult.success` and
+the verdict of :meth:`IdentificationResult.report` judge each sub-model's R^2.
+
 Derivatives. The commands are held constant over each 0.1 s control period (zero-order hold) and
 the plant is integrated finely in between, so the observed states are exact samples of a smooth
 trajectory whose derivatives jump at every command change. The *interval* difference
@@ -76,6 +100,8 @@ True
 True
 
 Modules: :mod:`~racing_lib.experiments.sysid.manoeuvres` (what is driven, on any plant),
+:mod:`~racing_lib.experiments.sysid.watch` (the watchdog and its settings),
+:mod:`~racing_lib.experiments.sysid.limits` (the actuator-limit runs and :func:`collect_logs`),
 :mod:`~racing_lib.experiments.sysid.samples` (logs to samples),
 :mod:`~racing_lib.experiments.sysid.lateral` and :mod:`~racing_lib.experiments.sysid.longitudinal`
 (the fits), :mod:`~racing_lib.experiments.sysid.identify` (the whole identification and its
@@ -92,6 +118,7 @@ from racing_lib.experiments.sysid.identify import (
     main,
     run,
 )
+from racing_lib.experiments.sysid.limits import collect_logs, full_throttle_log, steering_rate_log
 from racing_lib.experiments.sysid.longitudinal import pedal_map_r2
 from racing_lib.experiments.sysid.manoeuvres import (
     MANOEUVRES,
@@ -99,12 +126,12 @@ from racing_lib.experiments.sysid.manoeuvres import (
     braking_logs,
     circle_logs,
     coast_down_log,
-    collect_logs,
     lap_logs,
     simulated_car,
     step_logs,
 )
 from racing_lib.experiments.sysid.samples import FitStats
+from racing_lib.experiments.sysid.watch import LimitEvent, ManoeuvreSettings
 
 __all__ = [
     "MANOEUVRES",
@@ -112,10 +139,13 @@ __all__ = [
     "TOLERANCES",
     "FitStats",
     "IdentificationResult",
+    "LimitEvent",
+    "ManoeuvreSettings",
     "braking_logs",
     "circle_logs",
     "coast_down_log",
     "collect_logs",
+    "full_throttle_log",
     "identify",
     "lap_logs",
     "main",
@@ -123,4 +153,5 @@ __all__ = [
     "run",
     "simulated_car",
     "step_logs",
+    "steering_rate_log",
 ]

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import math
 import sys
 import time
 from collections.abc import Sequence
@@ -16,9 +17,15 @@ from typing import Any
 
 from racing_lib.config import fast_mode
 from racing_lib.errors import ModelError
-from racing_lib.experiments.sysid.lateral import _fit_lateral, _front_force_sin
-from racing_lib.experiments.sysid.longitudinal import _fit_brake_limit, _fit_coast_down, _fit_pedal
-from racing_lib.experiments.sysid.manoeuvres import MANOEUVRES, collect_logs
+from racing_lib.experiments.sysid.lateral import _fit_lateral, _fit_steer_rate, _front_force_sin
+from racing_lib.experiments.sysid.limits import collect_logs
+from racing_lib.experiments.sysid.longitudinal import (
+    _fit_brake_limit,
+    _fit_coast_down,
+    _fit_full_throttle,
+    _fit_pedal,
+)
+from racing_lib.experiments.sysid.manoeuvres import MANOEUVRES
 from racing_lib.experiments.sysid.samples import (
     _MIN_SAMPLES,
     Derivative,
@@ -54,6 +61,10 @@ __all__ = ["TOLERANCES", "IdentificationRecord", "IdentificationResult", "identi
 #: fit statistics and notes. Its values are numbers, strings, lists and nested objects, hence
 #: ``Any``.
 IdentificationRecord = dict[str, Any]
+
+#: The least R^2 a sub-model must reach for :attr:`IdentificationResult.success`: it explains at
+#: least half of the variance of what it predicts.
+R2_FLOOR = 0.5
 
 TOLERANCES: dict[str, float] = {
     "C_xw": 0.10,
@@ -114,6 +125,13 @@ class IdentificationResult:
         Control periods in the logs.
     elapsed : float
         Wall time of the identification, s.
+    steer_rate_max : float
+        Identified rate limit of the steering actuator, rad/s (``inf``: none seen; ``nan``: no
+        steering-rate manoeuvre in the logs).
+    steer_max : float or None
+        The data sheet's steering-angle limit, rad (passed through; None: not given).
+    v_top : float
+        Top speed reached at full throttle, m/s (``nan``: no full-throttle manoeuvre).
     """
 
     params: ModelParams
@@ -123,6 +141,28 @@ class IdentificationResult:
     notes: tuple[str, ...] = ()
     n_samples: int = 0
     elapsed: float = 0.0
+    steer_rate_max: float = math.nan
+    steer_max: float | None = None
+    v_top: float = math.nan
+
+    @property
+    def success(self) -> bool:
+        """Whether every sub-model explains its data: R^2 >= :data:`R2_FLOOR` (NaN: not judged).
+
+        The fits that cannot determine a parameter raise instead (:class:`ModelError`); this is
+        the quality of those that ran, on the data each was fitted to. Held-out scores are
+        reported, not judged: their R^2 depends on how much the held-out blocks happen to vary
+        (a block of coasting barely does, and a small residual then gives a small R^2).
+        """
+        return not self.poor_fits()
+
+    def poor_fits(self) -> list[str]:
+        """The sub-models whose R^2 is below :data:`R2_FLOOR`, by fit name."""
+        return [
+            k
+            for k, f in self.fits.items()
+            if "held out" not in k and math.isfinite(f.r2) and f.r2 < R2_FLOOR
+        ]
 
     def car_model(
         self,
@@ -138,10 +178,22 @@ class IdentificationResult:
             Share of the identified friction the planner leaves unused (default
             :data:`~racing_lib.model.GRIP_MARGIN`).
         **fields
-            Other :class:`~racing_lib.model.CarModel` fields (options, steering limits, edge
-            margin).
+            Other :class:`~racing_lib.model.CarModel` fields (options, edge margin); steering
+            limits given here replace the identified ones.
+
+        Notes
+        -----
+        The steering actuator is the identified one: its lag ``steer_tau`` (s), its rate limit
+        ``steer_rate_max`` (rad/s) when the steering-rate manoeuvre found one, and the data
+        sheet's angle limit ``steer_max`` (rad) when it was given to :func:`identify`; what was
+        not identified keeps :class:`~racing_lib.model.CarModel`'s default.
         """
-        return CarModel(self.params, steer_tau=self.steer_tau, grip_margin=grip_margin, **fields)
+        actuator: dict[str, Any] = {"steer_tau": self.steer_tau}
+        if math.isfinite(self.steer_rate_max):
+            actuator["steer_rate_max"] = self.steer_rate_max
+        if self.steer_max is not None:
+            actuator["steer_max"] = self.steer_max
+        return CarModel(self.params, grip_margin=grip_margin, **(actuator | fields))
 
     def value(self, name: str) -> float:
         """A fitted value by its report name (e.g. ``"C_xw"``, ``"mu*D_f"``, ``"C_alpha_r"``)."""
@@ -192,9 +244,21 @@ class IdentificationResult:
         ffmt = "  ".join(f"{{:<{w}}}" for w in fw)
         out += [ffmt.format(*fhead), ffmt.format(*("-" * w for w in fw))]
         out += [ffmt.format(*x) for x in flines]
+        out += ["", self._verdict()]
         out += ["", *(f"note: {n}" for n in self.notes)]
         out.append(f"{self.n_samples} control periods, identified in {self.elapsed:.1f} s.")
         return "\n".join(out)
+
+    def _verdict(self) -> str:
+        """The report's quality section: success, and the sub-models that fit poorly."""
+        poor = self.poor_fits()
+        if not poor:
+            return (
+                f"success: every sub-model explains its data (R^2 >= {R2_FLOOR:g} each; "
+                "a NaN R^2 is a fit with nothing to explain, e.g. a car without drag)"
+            )
+        worst = ", ".join(f"{k} (R^2 {self.fits[k].r2:.3f})" for k in poor)
+        return f"NO success: sub-models below R^2 {R2_FLOOR:g}: {worst}"
 
     def to_dict(self) -> IdentificationRecord:
         """JSON-ready summary (parameters, steering lag, table, fit statistics)."""
@@ -214,6 +278,7 @@ def identify(
     truth: VehicleParams | ModelParams | None = None,
     derivative: Derivative = "interval",
     fit_steer_lag: bool = True,
+    steer_max: float | None = None,
 ) -> IdentificationResult:
     """Identify the planning model's parameters from driving logs.
 
@@ -231,6 +296,9 @@ def identify(
     fit_steer_lag : bool
         Identify a first-order steering-actuator lag with the lateral parameters (recommended:
         otherwise the lag is mistaken for yaw inertia).
+    steer_max : float, optional
+        The data sheet's steering-angle limit, rad, passed through to
+        :meth:`IdentificationResult.car_model` (default: ``known.steer_max`` if it has one).
 
     Returns
     -------
@@ -248,7 +316,9 @@ def identify(
         raise ModelError(f"known must be a ModelParams; got {type(kp).__name__}.")
     S = _checked_samples(logs, derivative)
     fitted, tyres, fits, notes = _fit_all(kp, S, fit_steer_lag)
-    rows = _report_rows(fitted, tyres, fits, truth)
+    fitted, limits = _fit_limits(fitted, S, tyres, fits, notes)
+    rows = _report_rows(fitted, tyres, fits, truth, limits)
+    sheet_steer = steer_max if steer_max is not None else getattr(kp, "steer_max", None)
     return IdentificationResult(
         params=fitted,
         steer_tau=tyres["steer_tau"],
@@ -257,6 +327,9 @@ def identify(
         notes=tuple(notes),
         n_samples=int(S.vx.size),
         elapsed=time.perf_counter() - t0,
+        steer_rate_max=limits["steer_rate_max"],
+        steer_max=None if sheet_steer is None else float(sheet_steer),
+        v_top=limits["top speed"],
     )
 
 
@@ -324,6 +397,54 @@ def _fit_all(
     return fitted, tyres, fits, notes
 
 
+def _fit_limits(
+    fitted: ModelParams,
+    S: _Samples,
+    tyres: dict[str, float],
+    fits: dict[str, Any],
+    notes: list[str],
+) -> tuple[ModelParams, dict[str, float]]:
+    """Step 5: the actuators' limits (steering rate, power, top speed), after the model's fits.
+
+    Their manoeuvres feed no other fit. The full-throttle run's power limit enters the pedal map
+    only when the map's own fit found none (its laps and steps never ran out of power).
+
+    Parameters
+    ----------
+    fitted : ModelParams
+        The identified parameters so far.
+    S : _Samples
+        All samples.
+    tyres : dict
+        The lateral fit's values (``steer_tau`` in s).
+    fits, notes : dict, list
+        Extended in place with these fits' quality and findings.
+
+    Returns
+    -------
+    fitted : ModelParams
+        With the power limit, if it was missing.
+    limits : dict
+        ``steer_rate_max`` (rad/s), ``p_thr (full throttle)`` (W/kg), ``top speed`` (m/s).
+    """
+    rate, rate_stats, note = _fit_steer_rate(fitted, S, tyres)
+    notes.append(note)
+    if rate_stats is not None:
+        fits[rate_stats.name] = rate_stats
+    full, full_stats, note = _fit_full_throttle(fitted, S, _front_force_sin(fitted, S, tyres))
+    notes.append(note)
+    if full_stats is not None:
+        fits[full_stats.name] = full_stats
+    if fitted.pedal.p_thr is None and math.isfinite(full["p_thr"]):
+        fitted = fitted.replace(pedal=dataclasses.replace(fitted.pedal, p_thr=full["p_thr"]))
+        notes.append("the pedal map's power limit is the full-throttle run's")
+    return fitted, {
+        "steer_rate_max": rate,
+        "p_thr (full throttle)": full["p_thr"],
+        "top speed": full["v_top"],
+    }
+
+
 #: The report's rows: (parameter, unit, the manoeuvres it is fitted from).
 _REPORT_SPEC = (
     ("C_xw", "kg/m", "coast-down"),
@@ -346,6 +467,9 @@ _REPORT_SPEC = (
     ("pedal m_brk", "m/s^2", "laps+steps"),
     ("pedal p_thr", "W/kg", "laps+steps"),
     ("pedal a_brk_max", "m/s^2", "braking"),
+    ("steer_rate_max", "rad/s", "steering-rate"),
+    ("p_thr (full throttle)", "W/kg", "full-throttle"),
+    ("top speed", "m/s", "full-throttle"),
 )
 
 
@@ -354,6 +478,7 @@ def _report_rows(
     tyres: dict[str, float],
     fits: dict[str, Any],
     truth: VehicleParams | ModelParams | None,
+    limits: dict[str, float],
 ) -> list[dict[str, Any]]:
     """One row per identified parameter: fitted and true value, error (%), fit quality.
 
@@ -367,6 +492,8 @@ def _report_rows(
         The quality of each fit, by name.
     truth : VehicleParams, ModelParams or None
         The true car (None: no "true" column).
+    limits : dict
+        The actuators' limits (:func:`_fit_limits`).
     """
     tp, tau_true = _truth_params(truth)
     lat, yaw = fits["lateral balance (all data)"], fits["yaw balance (all data)"]
@@ -387,21 +514,23 @@ def _report_rows(
         "steps": f"RMS yaw {yaw.rms:.3g} rad/s^2",
         "laps+steps": f"held-out R^2 {fits['pedal map (held out)'].r2:.3f}",
         "braking": "median of the full stops",
+        "steering-rate": _fit_text(fits, "steering rate"),
+        "full-throttle": _fit_text(fits, "full throttle (power)"),
     }
+    power = _true_power(truth)
     rows = []
     for name, unit, man in _REPORT_SPEC:
         if name in fd:
             val, true = fd[name], td.get(name)
         elif name == "steer_tau":
             val, true = tyres["steer_tau"], tau_true
-        elif name == "pedal p_thr":
+        elif name in ("pedal p_thr", "p_thr (full throttle)"):
             # The one pedal-map number with a true value: engine power at the wheels per kg.
-            val = pedal_vals[name]
-            true = (
-                truth.power_max * truth.driveline_efficiency / truth.m
-                if hasattr(truth, "power_max")
-                else None
-            )
+            val = pedal_vals[name] if name in pedal_vals else limits[name]
+            true = power
+        elif name in limits:
+            val = limits[name]
+            true = getattr(truth, name, None) if name == "steer_rate_max" else None
         elif name in pedal_vals:
             val, true = pedal_vals[name], None  # the powertrain is nonlinear: no true map
         else:
@@ -420,6 +549,20 @@ def _report_rows(
             }
         )
     return rows
+
+
+def _fit_text(fits: dict[str, Any], name: str) -> str:
+    """The report's fit column for fit ``name``: its RMS residual, or that it did not run."""
+    return f"RMS {fits[name].rms:.3g} {fits[name].unit}" if name in fits else "not identified"
+
+
+def _true_power(truth: VehicleParams | ModelParams | None) -> float | None:
+    """The true power at the wheels per kg, W/kg: the simulated car's engine or a map's p_thr."""
+    if hasattr(truth, "power_max"):
+        return truth.power_max * truth.driveline_efficiency / truth.m
+    if isinstance(truth, ModelParams):
+        return truth.pedal.p_thr
+    return None
 
 
 def run(seed: int = 0, fast: bool | None = None, out: str | None = None) -> IdentificationResult:

@@ -6,10 +6,11 @@ yaw inertia from steering steps.
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
-from scipy.optimize import least_squares
+from scipy.optimize import least_squares, minimize_scalar
 
 from racing_lib.experiments.sysid.samples import (
     _V_MIN,
@@ -28,7 +29,7 @@ from racing_lib.vehicle import (
     static_axle_loads,
 )
 
-__all__ = []
+__all__ = ["rate_limited_steering"]
 
 
 def _axle_loads(kp: ModelParams, S: _Samples) -> tuple[np.ndarray, np.ndarray]:
@@ -121,6 +122,7 @@ def _lateral_samples(kp: ModelParams, S: _Samples) -> tuple[np.ndarray, np.ndarr
             "the logs hold no steady-state circles and no steering steps (laps are not used for "
             "the tyres: wall contacts and slides would corrupt them)",
             "circles",
+            S,
         )
     if not np.any(lat) or (
         np.max(np.abs(S.steer[lat])) < 0.01 and np.max(np.abs(S.a_y[lat])) < 1.0
@@ -129,17 +131,22 @@ def _lateral_samples(kp: ModelParams, S: _Samples) -> tuple[np.ndarray, np.ndarr
             "the Pacejka tyre parameters B, C, D and the yaw inertia I_zz",
             "the logs contain no steering (|delta| < 0.01 rad and |a_y| < 1 m/s^2 throughout)",
             "circles",
+            S,
         )
     ss = lat & S.settled & (np.abs(S.dr) < 0.03) & (np.abs(S.dvy) < 0.1) & (np.abs(S.dvx) < 0.5)
     ss &= np.abs(S.a_y) > 0.3
     a_y_max = float(np.max(np.abs(S.a_y[ss]))) if np.any(ss) else 0.0
     if np.count_nonzero(ss) < 30 or a_y_max < 0.55 * mu * g:
+        circ = (S.kind == "circles") & S.valid
+        seen = float(np.max(np.abs(S.a_y[circ]))) if np.any(circ) else 0.0
         raise _missing(
             "the Pacejka tyre parameters B, C, D",
-            f"{np.count_nonzero(ss)} steady-state cornering samples reaching |a_y| = "
-            f"{a_y_max:.1f} m/s^2; the peak factor D needs >= 30 samples up to at least "
-            f"{0.55 * mu * g:.1f} m/s^2 (0.55 mu g)",
+            f"it gave {np.count_nonzero(ss)} steady-state cornering samples, reaching |a_y| = "
+            f"{a_y_max:.1f} m/s^2 (the largest lateral acceleration in control: "
+            f"{seen:.1f} m/s^2); the peak factor D needs >= 30 samples up to at least "
+            f"{0.55 * mu * g:.1f} m/s^2 (0.55 mu g of the data sheet's mu = {mu:g})",
             "circles",
+            S,
         )
     return lat, ss
 
@@ -228,6 +235,7 @@ def _fit_lag_and_inertia(
             f"only {np.count_nonzero(tr)} samples with |r_dot| > 0.2 rad/s^2 (need >= 20): the "
             "logs have no yaw transients",
             "steps",
+            S,
         )
     idx = np.flatnonzero(lat)
     Ssub = _subset(S, idx)
@@ -276,6 +284,7 @@ def _fit_inertia(kp: ModelParams, Ssub: _Samples, fyr: np.ndarray) -> float:
             "the yaw inertia I_zz",
             f"the yaw-balance fit gave a non-positive inertia ({I_zz:.3g} kg m^2)",
             "steps",
+            Ssub,
         )
     return I_zz
 
@@ -310,4 +319,117 @@ def _front_force_sin(kp: ModelParams, S: _Samples, tyres: dict[str, float]) -> n
     a_f, _ = _slip(kp, S, delta)
     return pacejka_lateral(a_f, F_zf, kp.mu, tyres["B_f"], tyres["C_f"], tyres["D_f"]) * np.sin(
         delta
+    )
+
+
+def rate_limited_steering(
+    steer_cmd: np.ndarray, tau: float, rate_max: float, dt: float = 0.1, n_sub: int = 20
+) -> np.ndarray:
+    """Mean angle over each period behind a first-order lag whose rate is limited, rad.
+
+    ``delta_dot = clip((delta_cmd - delta) / tau, -rate_max, rate_max)`` with each command held
+    for ``dt`` s, integrated with ``n_sub`` exact-enough Euler substeps per period (the rate
+    limit makes the response piecewise linear); the actuator starts settled at the first command.
+
+    Parameters
+    ----------
+    steer_cmd : ndarray, shape (N,)
+        Steering commands, rad.
+    tau : float
+        Time constant of the lag, s.
+    rate_max : float
+        Largest steering rate, rad/s.
+    dt : float
+        Control period, s.
+    n_sub : int
+        Substeps per period.
+    """
+    c = np.asarray(steer_cmd, dtype=float).ravel()
+    out = np.empty_like(c)
+    if c.size == 0:
+        return out
+    h = dt / n_sub
+    delta, tau = float(c[0]), max(float(tau), h)
+    for k, cmd in enumerate(c):
+        acc = 0.0
+        for _ in range(n_sub):
+            rate = min(max((cmd - delta) / tau, -rate_max), rate_max)
+            nxt = delta + h * rate
+            acc += 0.5 * (delta + nxt)
+            delta = nxt
+        out[k] = acc / n_sub
+    return out
+
+
+def _fit_steer_rate(
+    kp: ModelParams, S: _Samples, tyres: dict[str, float]
+) -> tuple[float, FitStats | None, str]:
+    """The steering actuator's rate limit (rad/s) from the steering-rate manoeuvre.
+
+    With the identified tyres and lag fixed, a one-parameter search for the rate limit that
+    best explains the lateral balance ``m a_y = F_yf cos(delta) + F_yr`` of the steering-rate
+    logs (``delta`` from :func:`rate_limited_steering`). A rate the data cannot bound from above
+    (the best fit at the search's top, 20 rad/s) is reported as ``inf``.
+
+    Returns
+    -------
+    rate : float
+        rad/s (``inf``: none seen; ``nan``: no steering-rate logs).
+    stats : FitStats or None
+        The lateral balance on those logs with the fitted rate.
+    note : str
+        What was found, for the result's notes.
+    """
+    logs = [(a, b) for a, b in S.bounds if S.kind[a] == "steering-rate"]
+    if not logs:
+        return (
+            math.nan,
+            None,
+            (
+                "no steering-rate limit identified: the logs hold no 'steering-rate' manoeuvre "
+                "(racing_lib.experiments.sysid.steering_rate_log)"
+            ),
+        )
+    idx = np.concatenate([np.arange(a, b) for a, b in logs])
+    use = idx[S.valid[idx] & (S.vx[idx] > _V_MIN)]
+    sub = _subset(S, use)
+    F_zf, F_zr = _axle_loads(kp, sub)
+    tau = tyres["steer_tau"]
+
+    def residual(log_rate: float) -> np.ndarray:
+        delta = np.empty(S.vx.size)
+        for a, b in logs:
+            delta[a:b] = rate_limited_steering(S.steer[a:b], tau, math.exp(log_rate))
+        d = delta[use]
+        af, ar = _slip(kp, sub, d)
+        fyf = pacejka_lateral(af, F_zf, kp.mu, tyres["B_f"], tyres["C_f"], tyres["D_f"])
+        fyr = pacejka_lateral(ar, F_zr, kp.mu, tyres["B_r"], tyres["C_r"], tyres["D_r"])
+        return (fyf * np.cos(d) + fyr) / kp.m - sub.a_y
+
+    grid = np.log(np.geomspace(0.05, 20.0, 25))
+    costs = [float(np.sum(residual(g) ** 2)) for g in grid]
+    k = int(np.argmin(costs))
+    lo, hi = grid[max(k - 1, 0)], grid[min(k + 1, grid.size - 1)]
+    best = minimize_scalar(lambda g: float(np.sum(residual(g) ** 2)), bounds=(lo, hi),
+                           method="bounded").x  # fmt: skip
+    e = residual(best)
+    stats = FitStats("steering rate", int(use.size), _rms(e), "m/s^2", _r2(sub.a_y, e), 1.0)
+    step = float(np.max(np.abs(np.diff(S.steer[idx]))))
+    if k == grid.size - 1:
+        return (
+            math.inf,
+            stats,
+            (
+                f"no steering-rate limit seen: steps of {step:.3f} rad are followed as the "
+                f"{tau:.3f} s lag alone predicts (a limit, if any, is above 20 rad/s)"
+            ),
+        )
+    rate = float(math.exp(best))
+    return (
+        rate,
+        stats,
+        (
+            f"steering-rate limit {rate:.3g} rad/s from {len(logs)} steering-rate log(s) with "
+            f"steps of {step:.3f} rad (lateral balance RMS {stats.rms:.3g} m/s^2)"
+        ),
     )

@@ -6,6 +6,7 @@ and pedal steps, the braking limit from full stops.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
 import numpy as np
@@ -46,24 +47,28 @@ def _fit_coast_down(
             "the drag C_xw and rolling resistance c_rr",
             f"only {n} pedal-0 coast-down samples above {_V_MIN:.0f} m/s (need >= {_MIN_SAMPLES})",
             "coast-down",
+            S,
         )
+    # Measured resistance: what is left of v_x_dot after the kinematic, steering and grade terms.
+    y = S.dvx[cd] - S.r[cd] * S.vy[cd] + fyf_sin[cd] / kp.m + kp.g * np.sin(S.theta[cd])
     spread = (np.max(v**2) - np.min(v**2)) / np.max(v**2)
+    if spread < 0.5 and -float(np.mean(y)) < _NO_RESISTANCE:
+        return _no_resistance(n, v, y)
     if spread < 0.5:
         raise _missing(
             "the drag C_xw and rolling resistance c_rr",
             f"the coast-down speed only spans {np.min(v):.1f}-{np.max(v):.1f} m/s: at "
             "near-constant speed drag (v^2) and rolling resistance (constant) cannot be told apart",
             "coast-down",
+            S,
         )
-    # Measured resistance: what is left of v_x_dot after the kinematic, steering and grade terms.
-    y = S.dvx[cd] - S.r[cd] * S.vy[cd] + fyf_sin[cd] / kp.m + kp.g * np.sin(S.theta[cd])
     A = np.column_stack(
         [
             -drag_force(v, 1.0) / kp.m,  # per unit C_xw
             -rolling_resistance(kp.m * kp.g * np.cos(S.theta[cd]), 1.0) / kp.m,  # per unit c_rr
         ]
     )
-    cond = _check_regressor(A, ["v_x^2 (drag)", "1 (rolling)"], "C_xw and c_rr", "coast-down")
+    cond = _check_regressor(A, ["v_x^2 (drag)", "1 (rolling)"], "C_xw and c_rr", "coast-down", S)
     coef, *_ = np.linalg.lstsq(A, y, rcond=None)
     e = y - A @ coef
     # Engine braking check: a powertrain that drags at pedal 0 adds a deceleration growing with
@@ -91,6 +96,34 @@ def _fit_coast_down(
         )
     stats = {"coast-down": FitStats("coast-down", n, _rms(e), "m/s^2", _r2(y, e), cond)}
     return {"C_xw": float(coef[0]), "c_rr": float(coef[1]), "note": note}, stats
+
+
+#: Mean deceleration at pedal 0 below which a car is taken to have no drag nor rolling
+#: resistance, m/s^2 (a car that loses less than 1 m/s per minute of coasting).
+_NO_RESISTANCE = 0.02
+
+
+def _no_resistance(
+    n: int, v: np.ndarray, y: np.ndarray
+) -> tuple[dict[str, float | str], dict[str, FitStats]]:
+    """C_xw = c_rr = 0 for a car that does not slow down at pedal 0 (speeds ``v`` in m/s).
+
+    Both are non-negative, and their sum, the measured deceleration ``-y`` (m/s^2), is below
+    :data:`_NO_RESISTANCE`: each one is that small too. (Told apart they cannot be: the speed
+    hardly changes.)
+    """
+    decel = -float(np.mean(y))
+    note = (
+        f"no resistance at pedal 0: the coast-down kept {np.min(v):.1f}-{np.max(v):.1f} m/s "
+        f"(mean deceleration {decel:+.4f} m/s^2 < {_NO_RESISTANCE} m/s^2), so drag and rolling "
+        "resistance are taken as 0"
+    )
+    stats = {"coast-down": FitStats("coast-down", n, _rms(y), "m/s^2", float("nan"), 1.0)}
+    return {"C_xw": 0.0, "c_rr": 0.0, "note": note}, stats
+
+
+#: Manoeuvres whose samples only their own fits use, not the pedal map.
+_OWN_FITS = ("braking", "steering-rate", "full-throttle")
 
 
 def _pedal_regressor(S: _Samples, v_corner: float | None) -> np.ndarray:
@@ -139,8 +172,9 @@ def _fit_pedal(
 ) -> tuple[PedalMap, dict[str, FitStats]]:
     """Step 4: the pedal map by linear least squares, with a held-out R^2."""
     # Stops at full brake are saturated by the tyres, not by the brakes: they are for the
-    # braking limit (_fit_brake_limit), not for the slope.
-    use = S.valid & (S.vx > 3.0) & (S.kind != "braking")
+    # braking limit (_fit_brake_limit), not for the slope. The actuator-limit runs have fits of
+    # their own (_fit_full_throttle; the steering rate in lateral.py).
+    use = S.valid & (S.vx > 3.0) & ~np.isin(S.kind, _OWN_FITS)
     thr = np.count_nonzero(use & (S.pedal > 0.2))
     brk = np.count_nonzero(use & (S.pedal < -0.2))
     if thr < 20 or brk < 20:
@@ -149,6 +183,7 @@ def _fit_pedal(
             f"{thr} throttle samples (u_p > 0.2) and {brk} brake samples (u_p < -0.2); each "
             "needs >= 20",
             "steps",
+            S,
         )
     idx = np.flatnonzero(use)
     Su = _subset(S, idx)
@@ -156,7 +191,7 @@ def _fit_pedal(
     v_corner = _best_corner_speed(Su, y)
     A = _pedal_regressor(Su, v_corner)
     names = ["1", "v_x", "max(u_p, 0) (power-limited)", "min(u_p, 0)"]
-    cond = _check_regressor(A, names, "the pedal map", "steps")
+    cond = _check_regressor(A, names, "the pedal map", "steps", S)
     # Hold out every fifth block of 50 periods (5 s) to judge the map on data it was not fit to.
     test = (np.arange(idx.size) // 50) % 5 == 4
     coef_train, *_ = np.linalg.lstsq(A[~test], y[~test], rcond=None)
@@ -169,6 +204,7 @@ def _fit_pedal(
             f"the fitted throttle/brake slopes ({coef[2]:.3g}, {coef[3]:.3g} m/s^2) are not both "
             "positive",
             "steps",
+            S,
         )
     m_xi = np.zeros(len(X))
     m_xi[X.VX] = coef[1]  # only the speed drives the powertrain; other states would fit noise
@@ -192,21 +228,46 @@ def _fit_brake_limit(kp: ModelParams, S: _Samples, fyf_sin: np.ndarray) -> tuple
     """Step 4b: the tyres' deceleration limit (m/s^2) from the full stops, or None without them.
 
     The median tyre deceleration over the full-brake samples above 10 m/s (below, the brakes
-    fade out towards standstill).
+    fade out towards standstill). A stop whose wheels locked was backed off by the manoeuvre's
+    watchdog to a lighter brake (:class:`~racing_lib.experiments.sysid.ManoeuvreSettings`):
+    "full" is then the strongest brake each stop held, and the limit the deceleration the car
+    gives short of lock-up.
     """
-    idx = np.flatnonzero(S.valid & (S.kind == "braking") & (S.pedal <= -0.999) & (S.vx > 10.0))
+    idx = np.flatnonzero(_full_brake(S) & S.valid & (S.vx > 10.0))
     if idx.size < _MIN_SAMPLES:
+        ran = np.any(S.kind == "braking")
+        todo = (
+            "higher start speeds (braking_logs(speeds=...)) give more samples"
+            if ran
+            else "add the 'braking' manoeuvre to bound a_min by the tyres"
+        )
         return None, (
             f"no braking limit: {idx.size} full-brake samples above 10 m/s (need >= "
-            f"{_MIN_SAMPLES}); add the 'braking' manoeuvre to bound a_min by the tyres"
+            f"{_MIN_SAMPLES}); {todo}"
         )
     decel = -_tyre_ax(kp, _subset(S, idx), fyf_sin[idx])
     limit = float(np.median(decel))
     spread = float(np.percentile(decel, 90) - np.percentile(decel, 10))
+    pedal = float(np.max(S.pedal[idx]))
+    held = "" if pedal <= -0.999 else f" at pedal {pedal:.2f} or harder (backed off from lock-up)"
     return limit, (
-        f"braking limit {limit:.2f} m/s^2 from {idx.size} full-brake samples "
+        f"braking limit {limit:.2f} m/s^2 from {idx.size} full-brake samples{held} "
         f"(10-90 % spread {spread:.2f} m/s^2)"
     )
+
+
+def _full_brake(S: _Samples) -> np.ndarray:
+    """The braking samples at the strongest brake their stop held for 1 s or more, bool."""
+    out = np.zeros(S.vx.size, dtype=bool)
+    for start, stop in S.bounds:
+        if S.kind[start] != "braking":
+            continue
+        pedal = S.pedal[start:stop]
+        levels, counts = np.unique(pedal[pedal < -0.2], return_counts=True)
+        held = levels[counts >= 10]
+        if held.size:
+            out[start:stop] = pedal <= float(np.min(held)) + 1e-3
+    return out
 
 
 def pedal_map_r2(params: ModelParams, logs: Sequence[Drive], steer_tau: float = 0.0) -> float:
@@ -225,3 +286,61 @@ def pedal_map_r2(params: ModelParams, logs: Sequence[Drive], steer_tau: float = 
     xi = np.zeros((S.vx.size, len(X)))
     xi[:, X.VX], xi[:, X.VY], xi[:, X.R] = S.vx, S.vy, S.r
     return _r2(y, y - params.pedal.ax(xi, S.pedal))
+
+
+def _fit_full_throttle(
+    kp: ModelParams, S: _Samples, fyf_sin: np.ndarray
+) -> tuple[dict[str, float], FitStats | None, str]:
+    """Step 4c: power per mass (W/kg) and top speed (m/s) from the full-throttle run.
+
+    The tyre acceleration ``a_x`` (Eq. 5 solved for it, with the identified resistances) times
+    the speed is the power at the wheels per kg; where the engine is power limited it is a
+    plateau, below it torque (or traction) limits it and at a governed top speed it drops to
+    zero. The plateau is the median of the samples within 15 % of the 95th percentile. The top
+    speed is the largest speed reached; it is a governed one when the run ended with the car no
+    longer accelerating although the power would still have given ``0.3 P / v_x`` or more.
+
+    Returns
+    -------
+    values : dict
+        ``p_thr`` (W/kg), ``v_top`` (m/s), ``governed`` (1.0 or 0.0); NaN without the run.
+    stats : FitStats or None
+        ``a_x = P / v_x`` on the power-limited samples.
+    note : str
+        What was found, for the result's notes.
+    """
+    nan = {"p_thr": math.nan, "v_top": math.nan, "governed": 0.0}
+    logs = [(a, b) for a, b in S.bounds if S.kind[a] == "full-throttle"]
+    if not logs:
+        note = (
+            "no power limit from a full-throttle run: the logs hold no 'full-throttle' "
+            "manoeuvre (racing_lib.experiments.sysid.full_throttle_log)"
+        )
+        return nan, None, note
+    idx = np.concatenate([np.arange(a, b) for a, b in logs])
+    use = idx[S.valid[idx] & (S.pedal[idx] >= 0.999) & (S.vx[idx] > _V_MIN)]
+    v_top = float(np.max(S.vx[idx]))
+    if use.size < 20:
+        note = (
+            f"no power limit: the 'full-throttle' manoeuvre ran, but held full throttle for "
+            f"only {use.size} valid periods (need >= 20; reached {v_top:.1f} m/s): its watchdog "
+            "backed the throttle off (wheel spin). Try a higher start speed "
+            "(full_throttle_log(v_start=...)) or a longer ramp (ramp=...)"
+        )
+        return nan | {"v_top": v_top}, None, note
+    sub = _subset(S, use)
+    a_x = _tyre_ax(kp, sub, fyf_sin[use])
+    power = a_x * sub.vx
+    plateau = power >= 0.85 * float(np.percentile(power, 95))
+    p = float(np.median(power[plateau]))
+    e = a_x[plateau] - p / sub.vx[plateau]
+    n = int(np.count_nonzero(plateau))
+    stats = FitStats("full throttle (power)", n, _rms(e), "m/s^2", _r2(a_x[plateau], e), 1.0)
+    last = slice(max(sub.vx.size - 10, 0), None)
+    governed = bool(np.mean(a_x[last]) < 0.3 * p / v_top)
+    what = "a governed top speed" if governed else "the speed reached when the run ended"
+    note = (
+        f"full throttle: {p:.4g} W/kg at the wheels from {n} power-limited samples; "
+        f"{v_top:.1f} m/s is {what}"
+    )
+    return {"p_thr": p, "v_top": v_top, "governed": float(governed)}, stats, note

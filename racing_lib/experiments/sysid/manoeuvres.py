@@ -9,9 +9,9 @@ from typing import Any
 
 import numpy as np
 
-from racing_lib.config import fast_mode
 from racing_lib.control.nominal import NominalController, NominalSettings
-from racing_lib.errors import ModelError
+from racing_lib.errors import ModelError, PlantError
+from racing_lib.experiments.sysid.watch import ManoeuvreSettings, _Watchdog
 from racing_lib.geometry import FrenetTracker, Path, Track
 from racing_lib.interfaces import Plant
 from racing_lib.model.drive import Drive
@@ -26,7 +26,6 @@ __all__ = [
     "braking_logs",
     "coast_down_log",
     "circle_logs",
-    "collect_logs",
     "lap_logs",
     "simulated_car",
     "step_logs",
@@ -39,6 +38,8 @@ MANOEUVRES: dict[str, str] = {
     "circles": "steady-state constant-radius circles at rising speed (Pacejka B, C, D)",
     "steps": "steps of steering and pedal around a large circle (I_zz, steering lag, pedal map)",
     "braking": "full brake from several speeds on a long, nearly straight road (braking limit)",
+    "steering-rate": "large steering steps at low speed (the steering actuator's rate limit)",
+    "full-throttle": "full throttle until the speed stops rising (power limit, top speed)",
 }
 
 
@@ -64,14 +65,14 @@ def _record(
     for k in range(n_steps):
         steer, pedal = policy(obs, k)
         steer, pedal = float(steer), float(min(max(pedal, -1.0), 1.0))
-        obs = plant.step(steer, pedal)
+        obs = _checked_step(plant, steer, pedal, name, kind)
         cmds.append((steer, pedal))
         rows.append(obs)
         if stop is not None and stop(obs):
             break
     steer, pedal = policy(obs, len(cmds))
     steer, pedal = float(steer), float(min(max(pedal, -1.0), 1.0))
-    plant.step(steer, pedal)
+    _checked_step(plant, steer, pedal, name, kind)
     cmds.append((steer, pedal))
     arr = {key: np.array([getattr(o, key) for o in rows]) for key in ("t", "x", "y", "psi")}
     for key in ("vx", "vy", "r"):
@@ -79,6 +80,47 @@ def _record(
     theta = np.array([grade(o.x, o.y) for o in rows]) if grade is not None else np.zeros(len(rows))
     c = np.array(cmds, dtype=float).reshape(-1, 2)
     return Drive(steer=c[:, 0], pedal=c[:, 1], theta=theta, name=name, kind=kind, **arr)
+
+
+#: What to try when a manoeuvre loses the car, by manoeuvre.
+_REMEDY = {
+    "circles": "smaller speeds (ManoeuvreSettings.yaw_limit / slip_limit lower, so the watchdog "
+    "backs off earlier) or larger circles (circle_logs(radii=...))",
+    "steps": "smaller steering steps or a lower base speed (step_logs(speeds=...))",
+    "braking": "a gentler back-off (ManoeuvreSettings.backoff lower) or lower speeds "
+    "(braking_logs(speeds=...))",
+    "coast-down": "a lower top speed (coast_down_log(v_high=...))",
+    "laps": "a smaller share of the speed profile (lap_logs(scalings=...))",
+    "steering-rate": "a lower speed or smaller steps (ManoeuvreSettings.steer_rate_speed, "
+    "steer_rate_ay)",
+    "full-throttle": "a shorter run (ManoeuvreSettings.full_throttle_time)",
+}
+
+
+def _checked_step(plant: Any, steer: float, pedal: float, name: str, kind: str) -> Any:
+    """``plant.step(steer, pedal)``, with a failure or a non-finite observation named.
+
+    Raises
+    ------
+    PlantError
+        The plant raised one, or returned NaN or infinite values, during manoeuvre ``kind``.
+    """
+    try:
+        obs = plant.step(steer, pedal)
+    except PlantError as exc:
+        raise PlantError(
+            f"the '{kind}' manoeuvre ({name}) lost the car: {exc} Try "
+            f"{_REMEDY.get(kind, 'a gentler manoeuvre')}."
+        ) from exc
+    values = [getattr(obs, k) for k in ("t", "x", "y", "psi", "vx", "vy", "r")]
+    if not all(math.isfinite(float(v)) for v in values):
+        raise PlantError(
+            f"the '{kind}' manoeuvre ({name}): the plant returned a non-finite observation "
+            f"(t, x, y, psi, vx, vy, r = {values}) after steer {steer:.4g} rad, pedal "
+            f"{pedal:.3g}. Check the plant (its integrator and state), or try "
+            f"{_REMEDY.get(kind, 'a gentler manoeuvre')}."
+        )
+    return obs
 
 
 # --------------------------------------------------------------------------------------------------
@@ -164,6 +206,29 @@ def _start(car: CarUnderTest, track: Any, start_speed: float, seed: int | None) 
     return plant, plant.reset(seed=seed)
 
 
+def _watch(
+    car: CarUnderTest | VehicleParams | None,
+    settings: ManoeuvreSettings | None,
+    kappa: float | None,
+    dt: float,
+    slow_down: bool = False,
+    yaw_extra: float = 0.0,
+    watch_yaw: bool = True,
+) -> _Watchdog:
+    """The watchdog of one run: ``settings`` (default ones), path curvature (1/m), period (s)."""
+    known = _as_car(car).known
+    return _Watchdog(
+        settings or ManoeuvreSettings(),
+        kappa,
+        dt,
+        yaw_extra=yaw_extra,
+        wheelbase=float(known.l_f + known.l_r),
+        l_r=float(known.l_r),
+        watch_yaw=watch_yaw,
+        slow_down=slow_down,
+    )
+
+
 def _follower(track: Track) -> NominalController:
     """Pure-pursuit steering along the track's centre line (speed is commanded separately)."""
     return NominalController(track.centerline, speed=10.0)
@@ -187,12 +252,15 @@ def coast_down_log(
     seed: int = 0,
     v_high: float = 42.0,
     v_low: float = 8.0,
+    settings: ManoeuvreSettings | None = None,
 ) -> Drive:
     """Coast-down: full throttle to ``v_high`` (m/s), then pedal 0 until ``v_low`` (m/s).
 
     Driven on a 1.5 km radius circle (lateral acceleration below 1.2 m/s^2 at 42 m/s, so the
     steering's share of the deceleration is tiny and is still accounted for). Only the pedal-0
-    part is used for drag and rolling resistance; the run-up is pedal-map data.
+    part is used for drag and rolling resistance; the run-up is pedal-map data. The run-up's
+    throttle is watched (:class:`~racing_lib.experiments.sysid.watch.ManoeuvreSettings`): a car
+    whose driven wheels spin at full throttle is backed off.
 
     The car runs without its per-trial actuation noise (``reset(seed=None)``): a foot off the
     pedals is exactly pedal 0, while the simulated car's additive pedal noise would turn "0" into
@@ -205,11 +273,14 @@ def coast_down_log(
     ctrl = _follower(track)
     ctrl.reset(obs0)
     phase = {"coast": False}
+    watch = _watch(car, settings, 1.0 / 1500.0, plant.dt, slow_down=True)
+
+    coast: list[float] = []  # speeds since the coast began
 
     def policy(obs: Any, k: int) -> tuple[float, float]:
-        if obs.vx >= v_high:
+        if obs.vx >= min(v_high, watch.v_cap - 0.5):
             phase["coast"] = True
-        return ctrl.step(obs).steer, (0.0 if phase["coast"] else 1.0)
+        return watch.steer(obs, ctrl.step(obs).steer), watch(obs, 0.0 if phase["coast"] else 1.0)
 
     return _record(
         plant,
@@ -218,20 +289,38 @@ def coast_down_log(
         6000,
         f"coast-down {v_high:.0f}->{v_low:.0f} m/s",
         "coast-down",
-        stop=lambda o: phase["coast"] and o.vx < v_low,
+        stop=lambda o: phase["coast"] and (o.vx < v_low or _coasts_on(o, coast)),
     )
+
+
+def _coasts_on(obs: Any, speeds: list[float], window: int = 200) -> bool:
+    """Whether a coasting car kept its speed: it lost less than 0.1 m/s in ``window`` periods.
+
+    ``speeds`` (m/s) collects the coast's speeds. A car without drag nor rolling resistance never
+    reaches ``v_low``; 20 s at constant speed tell all there is (the resistances are 0).
+    """
+    speeds.append(float(obs.vx))
+    return len(speeds) > window and speeds[-window - 1] - speeds[-1] < 0.1
 
 
 def braking_logs(
     car: CarUnderTest | VehicleParams | None = None,
     speeds: Sequence[float] = (45.0, 35.0, 25.0),
     v_low: float = 8.0,
+    settings: ManoeuvreSettings | None = None,
 ) -> list[Drive]:
     """Straight-line stops: full throttle to each of ``speeds`` (m/s), then full brake to ``v_low``.
+
+    A car whose top speed lies below one of ``speeds`` brakes from its top speed.
 
     On the coast-down's 1.5 km circle, without actuation noise (a full stop is full brake). They
     measure the deceleration the tyres give when the brakes ask for more than the grip, which the
     brake slope of the pedal map, fitted on partial braking, cannot tell.
+
+    A car without anti-lock brakes may lock its wheels at full brake: the watchdog
+    (:class:`~racing_lib.experiments.sysid.watch.ManoeuvreSettings`) sees the car rotate off its
+    path, releases the brake and brakes on at ``backoff`` times the pedal that locked it: the stop
+    then measures the deceleration the car gives short of lock-up.
     """
     track = _proving_ground(1500.0, 30.0, "braking circle")
     logs = []
@@ -240,11 +329,17 @@ def braking_logs(
         ctrl = _follower(track)
         ctrl.reset(obs0)
         phase = {"brake": False}
+        watch = _watch(car, settings, 1.0 / 1500.0, plant.dt)
 
-        def policy(obs: Any, k: int, v_high=v_high, ctrl=ctrl, phase=phase) -> tuple[float, float]:
-            if obs.vx >= v_high:
+        seen: list[float] = []
+
+        def policy(obs: Any, k: int, v_high=v_high, ctrl=ctrl, phase=phase, watch=watch, v=seen):
+            v.append(float(obs.vx))
+            # At v_high, or at the car's top speed if lower (no gain in the last 2 s).
+            if obs.vx >= v_high or (len(v) > 20 and v[-1] - v[-21] < 0.1):
                 phase["brake"] = True
-            return ctrl.step(obs).steer, (-1.0 if phase["brake"] else 1.0)
+            steer = watch.steer(obs, ctrl.step(obs).steer)
+            return steer, watch(obs, -1.0 if phase["brake"] else 1.0)
 
         logs.append(
             _record(
@@ -266,6 +361,7 @@ def circle_logs(
     radii: Sequence[float] = (40.0, 80.0, 150.0),
     levels: int = 8,
     hold: float = 5.0,
+    settings: ManoeuvreSettings | None = None,
 ) -> list[Drive]:
     """Steady-state cornering: constant-radius circles (ISO 4138) at rising speed.
 
@@ -273,6 +369,12 @@ def circle_logs(
     a lateral acceleration of about 0.2 g up to about 0.95 of the friction limit ``mu g``, holding
     each for ``hold`` s, so the steering settles to a constant at every level (a steady state with
     ``r_dot ~ 0``).
+
+    The rise is a limit-seeking ramp: the watchdog
+    (:class:`~racing_lib.experiments.sysid.watch.ManoeuvreSettings`) lifts the throttle when the
+    car leaves the circle's steady state (power oversteer, or tyres weaker than the data sheet's
+    ``mu``), then caps and slows the throttle; after ``max_trips`` trips the speed stops rising and
+    holds the last level below the one that lost grip.
     """
     spec = _as_car(car)
     vp = spec.known
@@ -286,10 +388,17 @@ def circle_logs(
         ctrl.reset(obs0)
         hold_steps = int(round(hold / plant.dt))
         pi = _SpeedHold(dt=plant.dt)
+        watch = _watch(spec, settings, 1.0 / radius, plant.dt)
+        ceiling = [len(speeds) - 1]
 
-        def policy(obs: Any, k: int, speeds=speeds, ctrl=ctrl, pi=pi, h=hold_steps):
-            v_target = float(speeds[min(k // h, len(speeds) - 1)])
-            return ctrl.step(obs).steer, pi(v_target, obs.vx)
+        def policy(
+            obs: Any, k: int, speeds=speeds, ctrl=ctrl, pi=pi, h=hold_steps, w=watch, c=ceiling
+        ):
+            level = min(k // h, c[0])
+            if len(w.events) >= w.settings.max_trips and c[0] == len(speeds) - 1:
+                c[0] = level = max(level - 1, 0)  # the limit: hold the level below it
+            v_target = float(speeds[level])
+            return w.steer(obs, ctrl.step(obs).steer), w(obs, pi(v_target, obs.vx))
 
         logs.append(
             _record(plant, obs0, policy, hold_steps * levels, f"circle R={radius:.0f} m", "circles")
@@ -302,6 +411,7 @@ def step_logs(
     seed: int = 0,
     speeds: Sequence[float] = (15.0, 25.0, 35.0),
     duration: float = 40.0,
+    settings: ManoeuvreSettings | None = None,
 ) -> list[Drive]:
     """Steering steps and pedal steps around a 300 m radius circle, 60 m wide.
 
@@ -316,13 +426,17 @@ def step_logs(
     the planning model does not), so yaw transients under hard throttle or braking would bias the
     tyre and inertia fits. Braking stays below half pedal because harder braking overloads the
     simulated car's rear brakes (a 75 % front share against the load transfer of a ~1 g stop) and
-    spins it. ``seed`` fixes the random sequences.
+    spins it; the speed hold of the steering phases brakes no harder either (a car faster off
+    the line than the simulated one ends a pedal phase well above the base speed, and a full
+    brake would lock the rear wheels of a car without anti-lock brakes). ``seed`` fixes the
+    random sequences. The pedal is watched for side slip
+    (:class:`~racing_lib.experiments.sysid.watch.ManoeuvreSettings`) and for a yaw rate off the
+    circle's by more than the steering steps explain.
     """
     spec = _as_car(car)
     vp = spec.known
     L = float(vp.l_f + vp.l_r)
     mu, g = float(vp.mu), float(vp.g)
-    phase = 100  # control periods per phase (10 s)
     logs = []
     for i, v0 in enumerate(speeds):
         rng = np.random.default_rng(seed + 1000 + i)
@@ -348,26 +462,46 @@ def step_logs(
             k += hold
         pi = _SpeedHold(dt=plant.dt)
         sign = [1.0]
+        # The yaw rate is watched in a band widened by the steps' own kinematic yaw rate at the
+        # top of the speed band.
+        watch = _watch(spec, settings, 1.0 / 300.0, plant.dt, True, 1.3 * v0 * amp / L)
 
         def policy(
-            obs: Any, k: int, ctrl=ctrl, so=steer_off, pl=pedal_lvl, v0=v0, pi=pi, sign=sign
+            obs: Any,
+            k: int,
+            ctrl=ctrl,
+            so=steer_off,
+            pl=pedal_lvl,
+            v0=v0,
+            pi=pi,
+            sign=sign,
+            w=watch,
         ):
-            steer = ctrl.step(obs).steer
-            if abs(obs.vy) > 0.08 * max(obs.vx, 1.0):
-                return steer, 0.0  # a slide: recover with pure pursuit alone, no pedal
-            if (k // phase) % 2 == 0:  # steering phase
-                return steer + so[k], pi(v0, obs.vx)
-            # Pedal phase: a random walk in speed, reversed at the edges of the band.
-            if obs.vx < 0.7 * v0:
-                sign[0] = 1.0
-            elif obs.vx > 1.3 * v0:
-                sign[0] = -1.0
-            elif k % 30 == 0:
-                sign[0] = -sign[0]
-            return steer, sign[0] * pl[k] * (1.0 if sign[0] > 0.0 else 0.5)
+            steer, pedal = _step_command(obs, k, ctrl, so, pl, v0, pi, sign)
+            return w.steer(obs, steer), w(obs, pedal)
 
         logs.append(_record(plant, obs0, policy, n, f"steps at {v0:.0f} m/s", "steps"))
     return logs
+
+
+def _step_command(
+    obs: Any, k: int, ctrl: Any, so: Any, pl: Any, v0: float, pi: Any, sign: list
+) -> tuple[float, float]:
+    """The steps manoeuvre's command at period ``k`` (see :func:`step_logs`), rad and -."""
+    phase = 100  # control periods per phase (10 s)
+    steer = ctrl.step(obs).steer
+    if abs(obs.vy) > 0.08 * max(obs.vx, 1.0):
+        return steer, 0.0  # a slide: recover with pure pursuit alone, no pedal
+    if (k // phase) % 2 == 0:  # steering phase: the speed hold brakes no harder than the steps
+        return steer + so[k], max(pi(v0, obs.vx), -0.5)
+    # Pedal phase: a random walk in speed, reversed at the edges of the band.
+    if obs.vx < 0.7 * v0:
+        sign[0] = 1.0
+    elif obs.vx > 1.3 * v0:
+        sign[0] = -1.0
+    elif k % 30 == 0:
+        sign[0] = -sign[0]
+    return steer, sign[0] * pl[k] * (1.0 if sign[0] > 0.0 else 0.5)
 
 
 def lap_logs(
@@ -376,12 +510,15 @@ def lap_logs(
     tracks: Sequence[str] = ("expressway", "shortcut"),
     scalings: Sequence[float] = (0.6, 0.8),
     max_time: float = 200.0,
+    settings: ManoeuvreSettings | None = None,
 ) -> list[Drive]:
     """Nominal-controller laps of the built-in tracks at fractions of the track's speed profile.
 
     As in the paper, a simple nominal controller (pure pursuit + speed PI) drives the car along
     the centre line; ``scalings`` are fractions of the quasi-steady-state speed profile of
-    :func:`racing_lib.planning.speed.speed_profile`, m/s.
+    :func:`racing_lib.planning.speed.speed_profile`, m/s. The pedal is watched for side slip
+    beyond the kinematic slip of the centre line's curvature
+    (:class:`~racing_lib.experiments.sysid.watch.ManoeuvreSettings`).
     """
     spec = _as_car(car)
     vp = spec.known
@@ -405,54 +542,18 @@ def lap_logs(
             def grade(x: float, y: float, tracker=tracker, track=track) -> float:
                 return float(track.grade(tracker.project(x, y)[0]))
 
-            def policy(obs: Any, k: int, ctrl=ctrl) -> tuple[float, float]:
+            # The yaw rate is not judged (pure pursuit cuts the corners and scrapes the walls);
+            # the path's curvature sets the body-slip band and the yaw damper.
+            watch = _watch(spec, settings, 0.0, plant.dt, True, watch_yaw=False)
+            follow = FrenetTracker(track.centerline)
+
+            def policy(obs: Any, k: int, ctrl=ctrl, w=watch, f=follow, track=track):
                 cmd = ctrl.step(obs)
-                return cmd.steer, cmd.pedal
+                w.kappa = float(track.centerline.curvature(f.project(obs.x, obs.y)[0]))
+                return w.steer(obs, cmd.steer), w(obs, cmd.pedal)
 
             n = int(round(min(max_time, 1.05 * prof.lap_time / scale) / plant.dt))
             logs.append(
                 _record(plant, obs0, policy, n, f"lap {name} x{scale:.2f}", "laps", grade=grade)
             )
-    return logs
-
-
-def collect_logs(
-    seed: int = 0,
-    params: VehicleParams | None = None,
-    fast: bool | None = None,
-    car: CarUnderTest | None = None,
-) -> list[Drive]:
-    """Drive every manoeuvre of :data:`MANOEUVRES` with a car and return the logs.
-
-    Parameters
-    ----------
-    seed : int
-        Seeds the car's per-trial randomness and the random step sequences; a different seed gives
-        fresh data.
-    params : VehicleParams, optional
-        The simulated car to drive (default: the built-in car); ignored when ``car`` is given.
-    fast : bool, optional
-        Collect less data (shorter laps, fewer levels); default :func:`racing_lib.config.fast_mode`.
-    car : CarUnderTest, optional
-        Any other plant to identify, with what is known of it beforehand.
-
-    Returns
-    -------
-    list of Drive
-    """
-    fast = fast_mode() if fast is None else fast
-    test_car = car if car is not None else simulated_car(params)
-    logs: list[Drive] = []
-    if fast:
-        logs.append(coast_down_log(test_car, seed, v_high=38.0, v_low=12.0))
-        logs += circle_logs(test_car, seed, radii=(50.0, 120.0), levels=6, hold=4.0)
-        logs += step_logs(test_car, seed, speeds=(18.0, 30.0), duration=30.0)
-        logs += lap_logs(test_car, seed, tracks=("shortcut",), scalings=(0.8,), max_time=60.0)
-        logs += braking_logs(test_car, speeds=(45.0, 35.0))
-    else:
-        logs.append(coast_down_log(test_car, seed))
-        logs += circle_logs(test_car, seed)
-        logs += step_logs(test_car, seed)
-        logs += lap_logs(test_car, seed)
-        logs += braking_logs(test_car)
     return logs

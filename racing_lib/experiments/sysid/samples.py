@@ -145,8 +145,40 @@ def _samples(logs: Sequence[Drive], derivative: Derivative) -> _Samples:
 # --------------------------------------------------------------------------------------------------
 
 
-def _missing(what: str, detail: str, manoeuvre: str) -> ModelError:
-    """The error for data that cannot determine ``what``: names the manoeuvre that would."""
+#: What to change when a manoeuvre ran but its data could not determine a parameter.
+_ADVICE = {
+    "circles": (
+        "larger circles or more speed levels (circle_logs(radii=..., levels=..., hold=...)) "
+        "reach a higher steady lateral acceleration at speeds the car can hold; if its watchdog "
+        "backed off before the data sheet's mu g (the car's grip is lower, or the throttle spins "
+        "its wheels), give a truer mu in the data sheet or wider bands "
+        "(ManoeuvreSettings(yaw_limit=..., slip_limit=...))"
+    ),
+    "steps": (
+        "longer runs or more base speeds (step_logs(speeds=..., duration=...)); a car that "
+        "trips the watchdog in them needs lower speeds"
+    ),
+    "coast-down": (
+        "a wider speed range: a higher start and a lower end "
+        "(coast_down_log(v_high=..., v_low=...))"
+    ),
+    "braking": "higher start speeds (braking_logs(speeds=...))",
+    "laps": "more laps or speed scalings (lap_logs(tracks=..., scalings=...))",
+}
+
+
+def _missing(what: str, detail: str, manoeuvre: str, S: _Samples | None = None) -> ModelError:
+    """The error for data that cannot determine ``what``.
+
+    If the logs ``S`` hold the ``manoeuvre`` that determines it, the message says so and what to
+    change in it; otherwise it names the manoeuvre to add.
+    """
+    if S is not None and S.kind.size and np.any(S.kind == manoeuvre):
+        runs = sum(1 for start, _ in S.bounds if S.kind[start] == manoeuvre)
+        return ModelError(
+            f"cannot identify {what}: the '{manoeuvre}' manoeuvre ran ({runs} log(s)), but "
+            f"{detail}. To change: {_ADVICE.get(manoeuvre, 'drive it longer')}."
+        )
     return ModelError(
         f"cannot identify {what}: {detail}. Add the '{manoeuvre}' manoeuvre "
         f"({MANOEUVRES[manoeuvre]}) to the logs, e.g. with "
@@ -162,7 +194,9 @@ def _condition(A: np.ndarray) -> float:
     return float(np.linalg.cond(A / norms))
 
 
-def _check_regressor(A: np.ndarray, names: Sequence[str], what: str, manoeuvre: str) -> float:
+def _check_regressor(
+    A: np.ndarray, names: Sequence[str], what: str, manoeuvre: str, S: _Samples | None = None
+) -> float:
     """Raise if the columns of ``A`` are nearly linearly dependent; return the condition number."""
     cond = _condition(A)
     if not math.isfinite(cond) or cond > 1e4:
@@ -173,6 +207,7 @@ def _check_regressor(A: np.ndarray, names: Sequence[str], what: str, manoeuvre: 
             f"the regressors {list(names)} are nearly collinear (condition number {cond:.3g} "
             f"> 1e4; weakest: {weakest})",
             manoeuvre,
+            S,
         )
     return cond
 
