@@ -70,7 +70,10 @@ def make_plan(track, params, method: str) -> Trajectory:
         except Exception as exc:  # the planner is optional for this benchmark
             print(f"time-optimal planner not usable ({exc!r}); falling back to the centerline")
     # A speed profile with some grip in reserve (the identified model slightly overrates the car).
-    return Trajectory.from_centerline(track, params=params.replace(mu=1.0))
+    # Planned with mu = 1.0, and labelled so: the model it carries keeps that share of grip
+    # in reserve, and an MPC predicting with the full parameters agrees with it.
+    reserve = CarModel(params, grip_margin=1.0 - 1.0 / params.mu)
+    return Trajectory.from_centerline(track, params.replace(mu=1.0)).with_model(reserve)
 
 
 class PlanStart:

@@ -414,7 +414,10 @@ def _plan(track, params):
     """
     from racing_lib.planning.trajectory import Trajectory
 
-    return Trajectory.from_centerline(track, params=params.replace(mu=1.0))
+    # Planned with mu = 1.0, and labelled so: the model it carries keeps that share of grip
+    # in reserve, and an MPC predicting with the full parameters agrees with it.
+    reserve = CarModel(params, grip_margin=1.0 - 1.0 / params.mu)
+    return Trajectory.from_centerline(track, params.replace(mu=1.0)).with_model(reserve)
 
 
 @pytest.fixture(scope="module")

@@ -115,6 +115,6 @@ def test_expressway_centerline_lap_time_is_plausible():
 
 def test_bad_input_raises_planning_error():
     with pytest.raises(PlanningError, match="NaN"):
-        speed_profile(np.arange(5.0), np.array([0, 0, np.nan, 0, 0]))
+        speed_profile(np.arange(5.0), np.array([0, 0, np.nan, 0, 0]), ModelParams())
     with pytest.raises(PlanningError, match="increasing"):
-        speed_profile(np.array([0.0, 2.0, 1.0, 3.0]), np.zeros(4))
+        speed_profile(np.array([0.0, 2.0, 1.0, 3.0]), np.zeros(4), ModelParams())

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 from racing_lib.control.mpc import CoupledMPC, DecoupledMPC, MPCSettings
 from racing_lib.control.nominal import MODERATE_SPEED_SCALE, NominalController
-from racing_lib.errors import ControlError
+from racing_lib.errors import ControlError, checked_arguments
 from racing_lib.geometry import Track
 from racing_lib.interfaces import Controller
 from racing_lib.model import CarModel
@@ -36,11 +36,15 @@ class ControllerKind:
     speed_scale : float
         Share of the plan's speed it is asked to track (dimensionless): the pure-pursuit driver
         has no model of grip, so it drives the plan more slowly.
+    build : callable
+        Makes the controller: ``build(trajectory, model, track, settings)``, with the model to
+        predict with (None: the plan's) and the MPC settings (weights included).
     """
 
     name: str
     predicts: bool
     takes_weights: bool
+    build: Callable[[Trajectory, CarModel | None, Track | None, MPCSettings], Controller]
     speed_scale: float = 1.0
 
     def reference(self, plan: Trajectory) -> Trajectory:
@@ -48,23 +52,43 @@ class ControllerKind:
         return plan if self.speed_scale == 1.0 else plan.scale_speed(self.speed_scale)
 
 
-#: The controllers by name, in the order the command line lists them.
+def _nominal(
+    trajectory: Trajectory, model: CarModel | None, track: Track | None, settings: MPCSettings
+) -> Controller:
+    """The pure-pursuit driver: it has gains of its own, and no model or MPC settings."""
+    return NominalController.from_trajectory(trajectory)
+
+
+def _mpc(cls: type[CoupledMPC] | type[DecoupledMPC]) -> Callable[..., Controller]:
+    """The builder of an MPC class: the plan, the model to predict with, the track, settings."""
+
+    def build(
+        trajectory: Trajectory, model: CarModel | None, track: Track | None, settings: MPCSettings
+    ) -> Controller:
+        return cls(trajectory, model, track=track, settings=settings)
+
+    return build
+
+
+#: The controllers by name, in the order the command line lists them. A new controller is one
+#: more entry here.
 CONTROLLERS: dict[str, ControllerKind] = {
     kind.name: kind
     for kind in (
         ControllerKind(
-            "nominal", predicts=False, takes_weights=False, speed_scale=MODERATE_SPEED_SCALE
+            "nominal",
+            predicts=False,
+            takes_weights=False,
+            build=_nominal,
+            speed_scale=MODERATE_SPEED_SCALE,
         ),  # fmt: skip
-        ControllerKind("coupled-mpc", predicts=True, takes_weights=True),
-        ControllerKind("decoupled-mpc", predicts=True, takes_weights=True),
+        ControllerKind("coupled-mpc", predicts=True, takes_weights=True, build=_mpc(CoupledMPC)),
+        ControllerKind(
+            "decoupled-mpc", predicts=True, takes_weights=True, build=_mpc(DecoupledMPC)
+        ),
     )
 }
 CONTROLLER_NAMES = tuple(CONTROLLERS)
-
-_MPCS: dict[str, Callable[..., Controller]] = {
-    "coupled-mpc": CoupledMPC,
-    "decoupled-mpc": DecoupledMPC,
-}
 
 
 def controller_kind(name: str) -> ControllerKind:
@@ -94,6 +118,7 @@ def mpc_settings(
     return dataclasses.replace(settings, **weights)
 
 
+@checked_arguments
 def build_controller(
     name: str,
     trajectory: Trajectory,
@@ -123,10 +148,7 @@ def build_controller(
         MPC: blend the linearization trajectory from the current state to the plan.
     """
     kind = controller_kind(name)
-    if not kind.predicts:
-        return NominalController.from_trajectory(trajectory)
-    settings = mpc_settings(weights, smooth_transition)
-    return _MPCS[kind.name](trajectory, model, track=track, settings=settings)
+    return kind.build(trajectory, model, track, mpc_settings(weights, smooth_transition))
 
 
 __all__ = [

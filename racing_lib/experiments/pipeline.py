@@ -35,7 +35,6 @@ A quick one (a few seconds):
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import os
 import warnings
@@ -57,7 +56,7 @@ from racing_lib.experiments.lap import (
     summarize,
 )
 from racing_lib.geometry import Track
-from racing_lib.model import CarModel, ModelOptions, identified_model
+from racing_lib.model import CarModel, ModelMismatchWarning, identified_model
 from racing_lib.planning import PlanResult, Trajectory, plan
 from racing_lib.tracks import load_track
 
@@ -254,11 +253,18 @@ def _check_choices(
     controller: str,
     weights: str | Mapping[str, float] | None,
     model: CarModel | None,
+    reference: Trajectory | str | os.PathLike[str] | None,
     trials: int,
     seed: int,
 ) -> ControllerKind:
     """Refuse bad names and numbers before any planning (which can take tens of seconds)."""
     kind = controller_kind(controller)
+    if reference is not None and not isinstance(reference, Trajectory | str | os.PathLike):
+        raise ArgumentError(
+            f"reference must be a planned Trajectory or the path of a plan file, got "
+            f"{type(reference).__name__}; make one with racing_lib.planning.plan(track) or "
+            "`racing-lib plan --out PLAN.csv`."
+        )
     if model is not None and not isinstance(model, CarModel):
         raise ArgumentError(
             f"model must be a racing_lib.model.CarModel, got {type(model).__name__}; for "
@@ -287,43 +293,23 @@ def _check_choices(
     return kind
 
 
-def _model_differences(planned: CarModel, used: CarModel) -> list[str]:
-    """The fields in which two models differ, as ``name: plan X, controller Y`` texts."""
-    out = []
-    pairs = [(f.name, planned.options, used.options) for f in dataclasses.fields(ModelOptions)]
-    pairs += [(name, planned, used) for name in ("steer_tau", "steer_max", "steer_rate_max")]
-    for name, a, b in pairs:
-        if getattr(a, name) != getattr(b, name):
-            out.append(f"{name}: plan {getattr(a, name)}, controller {getattr(b, name)}")
-    pa, pb = planned.params.to_dict(), used.params.to_dict()
-    changed = sorted(k for k in pa if pa[k] != pb[k])
-    if changed:
-        out.append(f"parameters {', '.join(changed)}")
-    return out
+def _say_model(trajectory: Trajectory, model: CarModel | None, say: Callable[[str], None]) -> None:
+    """Report which model a ready-made plan is driven with, when it is not the plan's own.
 
-
-def _check_plan_matches(
-    trajectory: Trajectory, model: CarModel, say: Callable[[str], None]
-) -> None:
-    """Warn when a plan was made with another model than the controller will predict with.
-
-    A plan made without drag, driven by an MPC that models drag, asks for speeds the controller's
-    model says cost more power than the plan budgeted; the lap still runs, but the gap to the plan
-    then measures the mismatch as much as the controller. (The margins are the planner's: they
-    do not enter the controller's prediction.)
+    The MPC itself warns of a mismatch (:class:`~racing_lib.model.ModelMismatchWarning`); a
+    plan without a model (an old plan file) is driven with the default one, with a warning.
     """
     if trajectory.model is None:
-        return
-    differ = _model_differences(trajectory.model, model)
-    if not differ:
-        return
-    message = (
-        f"the plan and the controller use different models ({'; '.join(differ)}); drive the "
-        "plan with the model it carries (omit model=, or on the command line the model flags) "
-        "or re-plan with the controller's model."
-    )
-    warnings.warn(message, ModelMismatchWarning, stacklevel=3)
-    say(f"warning: {message}")
+        message = (
+            "this plan carries no model (a plan file from before models were stored): it is "
+            "driven with the default model, racing_lib.model.identified_model(); re-plan to "
+            "record the model it was made with."
+        )
+        warnings.warn(message, ModelMismatchWarning, stacklevel=4)
+        say(f"warning: {message}")
+    elif model is not None and trajectory.model.differences(model):
+        differ = "; ".join(trajectory.model.differences(model))
+        say(f"warning: the plan and the controller use different models ({differ})")
 
 
 def _lap_line(seed: int | None, m: LapMetrics) -> str:
@@ -423,7 +409,7 @@ def race(
         A ``reference`` plan was made with another model than ``model``.
     """
     say = report or (lambda _line: None)
-    kind = _check_choices(controller, weights, model, trials, seed)
+    kind = _check_choices(controller, weights, model, reference, trials, seed)
     trk = load_track(track)  # a Track is returned as it is; None or a number is refused
 
     planned: PlanResult | None = None
@@ -441,10 +427,10 @@ def race(
             trajectory = Trajectory.load_csv(os.fspath(reference), track=trk)
             say(f"loaded plan {os.fspath(reference)} (planned lap {trajectory.lap_time:.2f} s)")
         plan_method = trajectory.method or method
+        if kind.predicts:
+            _say_model(trajectory, model, say)
         if model is None:
             model = trajectory.model if trajectory.model is not None else identified_model()
-        elif kind.predicts:
-            _check_plan_matches(trajectory, model, say)
 
     reference_tracked = kind.reference(trajectory)
     if reference_tracked is not trajectory:
@@ -481,10 +467,6 @@ def race(
         weights_source=source,
         configuration=config,
     )
-
-
-class ModelMismatchWarning(UserWarning):
-    """A plan is driven by a controller that predicts with other model effects."""
 
 
 __all__ = ["WEIGHT_CHOICES", "LapSummary", "ModelMismatchWarning", "RaceResult", "race"]

@@ -19,7 +19,7 @@ The names below are re-exported, so ``from racing_lib.model import ModelParams, 
 Taught in notebook 02.
 """
 
-from racing_lib.model.car_model import CarModel
+from racing_lib.model.car_model import CarModel, ModelMismatchWarning
 from racing_lib.model.drive import Drive
 from racing_lib.model.equations import (
     VX_GUARD,
@@ -51,6 +51,7 @@ __all__ = [
     "NX",
     "VX_GUARD",
     "Model",
+    "ModelMismatchWarning",
     "ModelOptions",
     "ModelParams",
     "PedalMap",

@@ -17,18 +17,25 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import numbers
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
+
+import numpy as np
 
 from racing_lib.errors import ModelError
 from racing_lib.io import JSONObject
 from racing_lib.model.params import ModelOptions, ModelParams
 from racing_lib.vehicle import VehicleParams
 
-__all__ = ["CarModel"]
+__all__ = ["CarModel", "ModelMismatchWarning"]
 
 #: The steering actuator assumed when none is identified: the simulated car's.
 _ACTUATOR = VehicleParams()
+
+
+class ModelMismatchWarning(UserWarning):
+    """A plan is driven by a controller that predicts with another model than it was made with."""
 
 
 @dataclass(frozen=True)
@@ -101,11 +108,13 @@ class CarModel:
     def _check_number(self, name: str, unit: str, ok: Callable[[float], bool], rule: str) -> None:
         """Store field ``name`` as a float, refusing a value that breaks ``rule``."""
         value = getattr(self, name)
-        if isinstance(value, bool) or not isinstance(value, int | float):
+        if isinstance(value, bool | np.bool_) or not isinstance(value, numbers.Real):
             raise ModelError(f"CarModel.{name} must be a number {rule}, got {value!r}.")
         value = float(value)
         if not ok(value):
-            raise ModelError(f"CarModel.{name} must be {rule} {unit}, got {value!r}.".strip())
+            raise ModelError(
+                f"CarModel.{name} must be {rule}{' ' + unit if unit else ''}, got {value!r}."
+            )
         object.__setattr__(self, name, value)
 
     # --- what the planner and the controller see --------------------------------------------------
@@ -117,7 +126,34 @@ class CarModel:
 
     def replace(self, **changes: ModelParams | ModelOptions | float | None) -> CarModel:
         """A copy with some fields changed (validated)."""
+        fields = {f.name for f in dataclasses.fields(self)}
+        unknown = sorted(set(changes) - fields)
+        if unknown:
+            raise ModelError(
+                f"CarModel has no field(s) {unknown}; its fields are {sorted(fields)}. A "
+                "parameter goes through params: model.replace(params=model.params.replace(...))."
+            )
         return dataclasses.replace(self, **changes)
+
+    def differences(self, other: CarModel) -> list[str]:
+        """What changes the prediction between this model and ``other``, one text per field.
+
+        Effects, steering actuator and parameters (``"drag: plan True, controller False"``,
+        ``"parameters mu, m"``); the margins are left out, since they are the planner's and do
+        not enter a controller's prediction. Empty when the two predict alike.
+        """
+        pairs = [(f.name, self.options, other.options) for f in dataclasses.fields(ModelOptions)]
+        pairs += [(name, self, other) for name in ("steer_tau", "steer_max", "steer_rate_max")]
+        out = [
+            f"{name}: plan {getattr(a, name)}, controller {getattr(b, name)}"
+            for name, a, b in pairs
+            if getattr(a, name) != getattr(b, name)
+        ]
+        mine, theirs = self.params.to_dict(), other.params.to_dict()
+        changed = sorted(k for k in mine if mine[k] != theirs[k])
+        if changed:
+            out.append(f"parameters {', '.join(changed)}")
+        return out
 
     def describe(self) -> str:
         """One line for people: friction, effects, steering lag and margins."""

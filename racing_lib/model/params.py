@@ -60,6 +60,13 @@ class ModelOptions:
     longitudinal_weight_transfer: bool = True
     lateral_weight_transfer: bool = False
 
+    def __post_init__(self) -> None:
+        for f in dataclasses.fields(self):
+            value = getattr(self, f.name)
+            if not isinstance(value, bool | np.bool_):
+                raise ModelError(f"ModelOptions.{f.name} must be True or False; got {value!r}.")
+            object.__setattr__(self, f.name, bool(value))
+
     def label(self) -> str:
         """Short text such as ``"drag+lon"`` for file names and plot legends."""
         parts = [

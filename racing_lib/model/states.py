@@ -50,7 +50,13 @@ NU: int = len(U)
 
 
 def as_float(name: str, value: object) -> float:
-    """``value`` as a finite float; ModelError naming ``name`` otherwise."""
+    """``value`` as a finite float; ModelError naming ``name`` otherwise.
+
+    Text and booleans are refused, though ``float()`` would take them: ``"1.2"`` or ``True`` in a
+    parameter is a mistake upstream, not a number.
+    """
+    if isinstance(value, str | bytes | bool | np.bool_):
+        raise ModelError(f"{name} must be a number; got {value!r}.")
     try:
         out = float(value)
     except (TypeError, ValueError):

@@ -160,11 +160,12 @@ def speed_profile(
         Increasing arc length of the nodes, m. On a closed path the first node is not repeated.
     kappa : array_like, shape (N,)
         Curvature of the path at the nodes, 1/m.
-    params : ModelParams or VehicleParams, optional
-        Planning parameters; read: ``mu``, ``D_f``, ``D_r`` (the friction circle's radius is
-        ``mu min(D_f, D_r) g``), ``m`` (kg), ``C_xw`` (kg/m), ``c_rr`` (-) and ``pedal``. Any
-        object with these names serves (the simulated car's ``VehicleParams`` does); a missing
-        value, or no parameters at all, takes the default of ``ModelParams()``.
+    params : ModelParams or VehicleParams
+        Planning parameters (required: no planner picks a model of its own); read: ``mu``,
+        ``D_f``, ``D_r`` (the friction circle's radius is ``mu min(D_f, D_r) g``), ``m`` (kg),
+        ``C_xw`` (kg/m), ``c_rr`` (-) and ``pedal``. Any object with these names serves (the
+        simulated car's ``VehicleParams`` does); a missing value takes the default of
+        ``ModelParams()``.
     pedal_map : PedalMap or callable, optional
         Tyre acceleration limits a_x in [a_min(v), a_max(v)], m/s^2 (see
         :func:`pedal_accel_limits`); default ``params.pedal``. Without any, the tyres' friction
@@ -199,7 +200,8 @@ def speed_profile(
     --------
     >>> import numpy as np
     >>> s = np.linspace(0.0, 2 * np.pi * 50.0, 200, endpoint=False)
-    >>> prof = speed_profile(s, np.full(200, 1 / 50.0), options=None)
+    >>> from racing_lib.model import ModelParams
+    >>> prof = speed_profile(s, np.full(200, 1 / 50.0), ModelParams())
     >>> round(float(prof.v[0]), 2)  # sqrt(mu g R) = sqrt(1.25 * 9.81 * 50); drag is tiny here
     24.76
     """
@@ -208,7 +210,10 @@ def speed_profile(
     theta = np.zeros(n) if theta is None else np.broadcast_to(np.asarray(theta, float), (n,))
     a_z = np.zeros(n) if a_z is None else np.broadcast_to(np.asarray(a_z, float), (n,))
     if params is None:
-        params = _DEFAULTS
+        raise PlanningError(
+            "speed_profile needs the model's parameters (a racing_lib.model.ModelParams, or any "
+            "object with its names): pass params, for example racing_lib.model.identified_params()."
+        )
     car = _point_mass(params, options, v_top)
     if pedal_map is None:
         pedal_map = getattr(params, "pedal", None)

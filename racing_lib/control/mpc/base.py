@@ -9,6 +9,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import time
+import warnings
 
 import numpy as np
 
@@ -30,7 +31,7 @@ from racing_lib.geometry import FrenetTracker, Track
 from racing_lib.geometry.spline import wrap_angle
 from racing_lib.interfaces import Command, Observation
 from racing_lib.jit import BufferedFunction
-from racing_lib.model import NU, NX, CarModel, U, X, discrete_linearization
+from racing_lib.model import NU, NX, CarModel, ModelMismatchWarning, U, X, discrete_linearization
 from racing_lib.model.actuator import steering_lag_coefficients
 from racing_lib.planning.trajectory import Trajectory
 
@@ -140,6 +141,23 @@ def edge_band(
     return theta, band_min, band_max
 
 
+def _warn_if_mismatched(planned: CarModel, used: CarModel) -> None:
+    """Warn when the MPC is to predict with another model than the plan was made with.
+
+    A plan made without drag, tracked by an MPC that models drag, asks for speeds the
+    controller's model says cost more power than the plan budgeted: the lap still runs, but the
+    gap to the plan then measures the mismatch as much as the controller.
+    """
+    differ = planned.differences(used)
+    if differ:
+        warnings.warn(
+            f"the plan and the controller use different models ({'; '.join(differ)}); drive "
+            "the plan with the model it carries (pass no model) or re-plan with this one.",
+            ModelMismatchWarning,
+            stacklevel=4,
+        )
+
+
 class MPCBase:
     """Shared machinery: plan lookup, state estimate, fallbacks, counters and timings."""
 
@@ -159,6 +177,8 @@ class MPCBase:
             )
         if model is None:
             model = plan.model
+        elif isinstance(model, CarModel) and plan.model is not None:
+            _warn_if_mismatched(plan.model, model)
         if not isinstance(model, CarModel):
             raise ControlError(
                 "the plan carries no model to predict with (an old plan file, or a plan made "

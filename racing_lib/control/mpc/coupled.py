@@ -53,8 +53,9 @@ class CoupledMPC(MPCBase):
     >>> from racing_lib.tracks import load_track
     >>> track = load_track("shortcut")
     >>> params = identified_params()
-    >>> plan = Trajectory.from_centerline(track, params=params.replace(mu=1.0))
-    >>> mpc = CoupledMPC(plan, CarModel(params), track=track)
+    >>> model = CarModel(params, grip_margin=0.2)  # a plan with a fifth of the grip in reserve
+    >>> plan = Trajectory.from_centerline(track, model.planning_params()).with_model(model)
+    >>> mpc = CoupledMPC(plan, track=track)  # predicts with the model the plan carries
     >>> car = SimulatedCar(track, start_speed=float(plan.vx[0]))
     >>> obs = car.reset(seed=0)
     >>> mpc.reset(obs)

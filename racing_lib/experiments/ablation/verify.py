@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import logging
 import os
+import tempfile
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path as FilePath
@@ -92,15 +93,23 @@ def blas_kernel() -> str:
 
 
 def probe(row: TableRow) -> str:
-    """Digest of a row's planned lap time and first lap (all but its wall-clock times).
+    """Digest of a row's plan and first lap: every number but the wall-clock times.
 
-    Two runs of the same code on the same BLAS kernel give the same probe; a change of a single
-    bit anywhere in the plan or the lap almost surely changes the lap time, an error mean or a
-    maximum, and with it the probe.
+    The planned lap time, the first lap's metrics and the row's ``profile`` (the first seed's lap
+    and the plan along the track, which chapter 07 draws). Two runs of the same code on the same
+    BLAS kernel give the same probe; a change of a single bit anywhere in the plan or the lap
+    almost surely changes one of these numbers, and with it the probe. The statistics pooled over
+    all seeds are not in it: a row whose first lap reproduced is taken to reproduce its others.
     """
     first = row["trial_metrics"][0]
     lap = {k: v for k, v in first.items() if k not in TIMING_FIELDS}
-    return digest({"planned_lap_time_s": row["planned_lap_time_s"], "first_lap": lap})
+    return digest(
+        {
+            "planned_lap_time_s": row["planned_lap_time_s"],
+            "first_lap": lap,
+            "profile": row.get("profile"),
+        }
+    )
 
 
 def _reference_probes(header: TableFile, rows: Sequence[TableRow]) -> dict[str, str]:
@@ -114,7 +123,12 @@ def _reference_probes(header: TableFile, rows: Sequence[TableRow]) -> dict[str, 
 def _recompute_first_laps(
     names: Sequence[str], rows: Mapping[str, TableRow], workers: int
 ) -> dict[str, TableRow]:
-    """Each named row recomputed for its first seed only (no cache), by name."""
+    """Each named row recomputed for its first seed only, by name.
+
+    Through a scratch cache folder, as the table was made: each plan is driven as its file
+    stores it (the nodes to nine digits), so the laps are those of the table, not of the
+    unrounded plan.
+    """
     out: dict[str, TableRow] = {}
     # Rows are grouped by their first seed and plan spacing, as run_ablation takes one of each.
     groups: dict[tuple[int, float | None], list[str]] = {}
@@ -125,12 +139,13 @@ def _recompute_first_laps(
     quiet = logging.getLogger("racing_lib").level
     logging.getLogger("racing_lib").setLevel(logging.ERROR)  # fallbacks are counted, not shown
     try:
-        for (seed, spacing), group in groups.items():
-            done = run_ablation(
-                group, trials=1, seed=seed, spacing=spacing, out_dir=None, workers=workers,
-                progress=False,
-            )  # fmt: skip
-            out.update({str(r["name"]): r for r in done})
+        with tempfile.TemporaryDirectory(prefix="racing-lib-verify-") as scratch:
+            for (seed, spacing), group in groups.items():
+                done = run_ablation(
+                    group, trials=1, seed=seed, spacing=spacing, out_dir=scratch,
+                    workers=workers, progress=False,
+                )  # fmt: skip
+                out.update({str(r["name"]): r for r in done})
     finally:
         logging.getLogger("racing_lib").setLevel(quiet)
     return out
@@ -213,9 +228,9 @@ def _restamped(row: TableRow, code: Mapping[str, str]) -> TableRow:
     plan_key = digest(plan_key_inputs(spec, track, spacing, code))
     inputs = row_key_inputs(spec, track, plan_key, tuned_weights(spec.config), row["seeds"], code)
     inputs["fast_mode"] = bool(row.get("fast_mode", False))
-    plan = {k: v for k, v in (row.get("plan") or {}).items() if k != "params"}
     out = {k: v for k, v in row.items() if k != "sha256"}
-    return {**out, "key": digest(inputs), "key_inputs": inputs, "plan": {**plan, "key": plan_key}}
+    plan = {**(row.get("plan") or {}), "key": plan_key}
+    return {**out, "key": digest(inputs), "key_inputs": inputs, "plan": plan}
 
 
 def restamp_table(
