@@ -265,3 +265,37 @@ def test_a_figure_eight_loads_plans_and_drives():
         s = np.unwrap(lap.log.s_ref, period=r.plan.trajectory.length)
         assert np.all(np.diff(s) > 0.0) and np.all(np.diff(s) < 10.0)
     assert 0.0 < r.lap_time_gap < 5.0
+
+
+def test_every_door_warns_when_told_to_predict_with_another_model(stadium):
+    """CoupledMPC, build_controller and LapSpec all warn when given a model that predicts
+    differently from the plan's; the same model, or one differing only in margins, is silent."""
+    from racing_lib.control import build_controller
+    from racing_lib.control.mpc import CoupledMPC
+    from racing_lib.experiments.lap import LapSpec, make_controller
+    from racing_lib.model import ModelMismatchWarning
+
+    track, reference = stadium
+    other = reference.model.replace(steer_tau=0.12)
+    with pytest.warns(ModelMismatchWarning, match="steer_tau: plan 0.08, controller 0.12"):
+        CoupledMPC(reference, other, track=track)
+    with pytest.warns(ModelMismatchWarning, match="steer_tau"):
+        build_controller("decoupled-mpc", reference, track=track, model=other)
+    with pytest.warns(ModelMismatchWarning, match="steer_tau"):
+        make_controller(LapSpec(track, reference, "coupled-mpc", model=other))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", ModelMismatchWarning)
+        CoupledMPC(reference, reference.model.replace(grip_margin=0.0), track=track)
+        build_controller("coupled-mpc", reference, track=track)
+
+
+def test_a_plan_without_a_model_is_driven_with_the_default_and_says_so(stadium):
+    from racing_lib.model import ModelMismatchWarning, identified_model
+
+    track, reference = stadium
+    lines: list[str] = []
+    with pytest.warns(ModelMismatchWarning, match="carries no model"):
+        result = race(track, controller="coupled-mpc", reference=reference.with_model(None),
+                      report=lines.append)  # fmt: skip
+    assert result.spec.model == identified_model()
+    assert any("carries no model" in line for line in lines)
