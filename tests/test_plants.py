@@ -23,6 +23,7 @@ from racing_lib.sim import SimulatedCar
 from racing_lib.vehicle import VehicleParams
 
 vm = pytest.importorskip("vehiclemodels.vehicle_dynamics_std")
+from test_sim import stadium  # noqa: E402  (the same test track as the simulated car's tests)
 from vehiclemodels.vehicle_parameters import setup_vehicle_parameters  # noqa: E402
 
 from racing_lib.plants.commonroad import (  # noqa: E402
@@ -36,22 +37,6 @@ from racing_lib.plants.commonroad import (  # noqa: E402
 from racing_lib.plants.std import N_STATE, std_vector_field  # noqa: E402
 
 BMW = 2
-
-
-def stadium(straight: float = 3000.0, radius: float = 200.0, width: float = 20.0,
-            boundary: str = "open") -> Track:  # fmt: skip
-    """Counter-clockwise stadium; s = 0 at the start of the bottom straight, heading +x."""
-    pts = [(i * 5.0, -radius) for i in range(int(straight / 5.0))]
-    n_arc = int(math.pi * radius / 5.0)
-    for i in range(n_arc):
-        a = -math.pi / 2 + math.pi * i / n_arc
-        pts.append((straight + radius * math.cos(a), radius * math.sin(a)))
-    pts += [(straight - i * 5.0, radius) for i in range(int(straight / 5.0))]
-    for i in range(n_arc):
-        a = math.pi / 2 + math.pi * i / n_arc
-        pts.append((radius * math.cos(a), radius * math.sin(a)))
-    xy = np.array(pts)
-    return Track(Path(xy[:, 0], xy[:, 1]), width, width, boundary=boundary, name="stadium")
 
 
 def open_area(radius: float = 300.0, width: float = 250.0) -> Track:
