@@ -266,6 +266,13 @@ def test_the_identified_actuator_reaches_the_car_model(bmw):
     assert model.steer_rate_max == result.steer_rate_max
     assert model.steer_max == p.steering.max
     assert model.steer_tau == result.steer_tau
+    assert model.v_top == result.v_top  # the plans keep below the governed top speed
+    # No anti-lock brakes: the full stops locked the wheels and were held at a lighter pedal,
+    # where the map now ends; the controller never brakes deeper.
+    pedal = result.params.pedal
+    assert 0.2 < pedal.brake_max < 1.0, pedal
+    assert pedal.full_brake() == pytest.approx(pedal.m_brk * pedal.brake_max)
+    assert pedal.full_brake() < 0.8 * result.params.mu * result.params.g
     assert "success" in result.report() and "steer_rate_max" in result.report()
 
 

@@ -4,6 +4,7 @@ linear bicycle model's steady-state yaw rate, and the two forms (time, space) ag
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import casadi as ca
@@ -563,3 +564,34 @@ def test_from_vehicle_takes_the_true_values() -> None:
     assert (params.mu, params.h_c, params.pedal.m_thr) == (1.1, 0.5, 2.0)
     with pytest.raises(ModelError, match="lacks the model parameter"):
         ModelParams.from_vehicle(object())
+
+
+def test_a_pedal_map_that_ends_short_of_the_full_pedal() -> None:
+    # A car whose wheels lock beyond pedal -0.5: braking is linear to there, and no deeper
+    # pedal is ever asked for.
+    full = PedalMap(m_0=0.0, m_xi=(0.0,) * 6, m_thr=5.0, m_brk=11.5)
+    locking = dataclasses.replace(full, brake_max=0.5)
+    assert locking.full_brake() == pytest.approx(5.75)
+    xi = np.zeros(6)
+    xi[X.VX] = 30.0
+    lo, hi = locking.limits(xi)
+    assert lo == pytest.approx(-5.75) and hi == pytest.approx(5.0)
+    assert locking.pedal(-9.0, xi) == pytest.approx(-0.5)  # clipped where the map ends
+    assert locking.pedal(-2.3, xi) == pytest.approx(-0.2)  # linear before it
+    assert full.pedal(-9.0, xi) == pytest.approx(-9.0 / 11.5)
+    assert PedalMap.from_dict(locking.to_dict()) == locking
+    for bad in (0.0, -0.5, 1.5, float("nan")):
+        with pytest.raises(ModelError, match="brake_max"):
+            dataclasses.replace(full, brake_max=bad)
+
+
+def test_the_car_model_carries_its_top_speed() -> None:
+    from racing_lib.model import DEFAULT_V_TOP, CarModel
+
+    model = CarModel(ModelParams())
+    assert model.v_top == DEFAULT_V_TOP
+    fast = model.replace(v_top=60.0)
+    assert CarModel.from_dict(fast.to_dict()) == fast
+    assert fast.differences(model) == []  # the top speed is the planner's; it predicts nothing
+    with pytest.raises(ModelError, match="v_top"):
+        model.replace(v_top=0.0)

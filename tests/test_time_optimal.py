@@ -226,3 +226,30 @@ def test_what_the_plan_asks_of_the_car_against_what_it_has(oval, nlp):
     # map's power limit keeps real plans within it: bench_circuits, chapter 08).
     assert demands["drive power"].share > 1.1
     assert demands["edge clearance"].peak > OPEN_MARGIN - 0.05
+
+
+W_DAX = TimeOptimalSettings().w_dax
+
+
+@pytest.mark.parametrize("drag", [True, False])
+def test_at_the_top_speed_the_plan_neither_crabs_nor_flickers(oval, qp, drag):
+    # A top speed the oval's long straight reaches. The bound is on the speed, not v_x alone:
+    # under a bound on v_x the optimum slid sideways down the straight, counting v_y as progress.
+    # And with v_x riding the bound, trapezoidal collocation fixes only pairwise means of a_x:
+    # without the a_x regularization the plan's a_x alternated node by node.
+    v_top = 30.0
+    params = PARAMS if drag else PARAMS.replace(C_xw=0.0, c_rr=0.0)
+    st = TimeOptimalSettings(spacing=2.5, v_top=v_top, w_dax=W_DAX)
+    res = solve_time_optimal(oval, params, OPTIONS, st, start=qp)
+    traj = res.trajectory
+    speed = np.hypot(traj.vx, traj.vy)
+    assert speed.max() <= v_top * (1 + 1e-6), speed.max()
+    top = speed > v_top - 0.05
+    assert top.sum() > 20, "the straight should ride the top speed"
+    # Where the speed rides its bound, a_x is what holds it there (drag), not a zig-zag about it
+    # (the nodes where the car arrives at the bound and leaves it aside).
+    runs = np.split(np.flatnonzero(top), np.flatnonzero(np.diff(np.flatnonzero(top)) > 1) + 1)
+    for run in runs:
+        inner = traj.ax[run[3:-3]]
+        if inner.size > 2:
+            assert np.max(np.abs(np.diff(inner))) < 0.25, np.round(inner[:12], 2)

@@ -19,7 +19,7 @@ The names below are re-exported, so ``from racing_lib.model import ModelParams, 
 Taught in notebook 02.
 """
 
-from racing_lib.model.car_model import CarModel, ModelMismatchWarning
+from racing_lib.model.car_model import DEFAULT_V_TOP, CarModel, ModelMismatchWarning
 from racing_lib.model.drive import Drive
 from racing_lib.model.equations import (
     VX_GUARD,
@@ -43,6 +43,7 @@ from racing_lib.model.params import BRAKE_KNEE, ModelOptions, ModelParams, Pedal
 from racing_lib.model.states import NU, NX, U, X
 
 __all__ = [
+    "DEFAULT_V_TOP",
     "BRAKE_KNEE",
     "GRIP_MARGIN",
     "CarModel",

@@ -28,10 +28,14 @@ from racing_lib.io import JSONObject
 from racing_lib.model.params import ModelOptions, ModelParams
 from racing_lib.vehicle import VehicleParams
 
-__all__ = ["CarModel", "ModelMismatchWarning"]
+__all__ = ["DEFAULT_V_TOP", "CarModel", "ModelMismatchWarning"]
 
 #: The steering actuator assumed when none is identified: the simulated car's.
 _ACTUATOR = VehicleParams()
+
+#: The top speed a model assumes when none is identified, m/s (190 km/h): a cap on the plans
+#: of the simulated car, whose power would take it faster on a long enough straight.
+DEFAULT_V_TOP = 190.0 / 3.6
 
 
 class ModelMismatchWarning(UserWarning):
@@ -67,6 +71,10 @@ class CarModel:
     edge_margin : float or None
         Distance the planned line keeps between the car's side and the track edge, m; None: the
         planner's default for the track's kind of boundary (walls or open edges).
+    v_top : float
+        Top speed, m/s: the plans keep the car's speed ``sqrt(v_x^2 + v_y^2)`` at or below it.
+        A car with a governed top speed (identified at full throttle) gives no acceleration
+        beyond it, whatever the pedal says; default :data:`DEFAULT_V_TOP`.
 
     Examples
     --------
@@ -85,6 +93,7 @@ class CarModel:
     steer_rate_max: float = _ACTUATOR.steer_rate_max
     grip_margin: float = 0.0
     edge_margin: float | None = None
+    v_top: float = DEFAULT_V_TOP
 
     def __post_init__(self) -> None:
         if not isinstance(self.params, ModelParams):
@@ -104,6 +113,7 @@ class CarModel:
         self._check_number("grip_margin", "", lambda v: 0.0 <= v < 0.5, "in [0, 0.5)")
         if self.edge_margin is not None:
             self._check_number("edge_margin", "m", lambda v: math.isfinite(v) and v >= 0, ">= 0")
+        self._check_number("v_top", "m/s", lambda v: math.isfinite(v) and v > 0.0, "> 0")
 
     def _check_number(self, name: str, unit: str, ok: Callable[[float], bool], rule: str) -> None:
         """Store field ``name`` as a float, refusing a value that breaks ``rule``."""
@@ -174,6 +184,7 @@ class CarModel:
             "steer_rate_max": self.steer_rate_max,
             "grip_margin": self.grip_margin,
             "edge_margin": self.edge_margin,
+            "v_top": self.v_top,
         }
 
     @classmethod

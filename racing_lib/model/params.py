@@ -135,6 +135,12 @@ class PedalMap:
     a_brk_max : float or None
         Tyre deceleration at full brake, m/s^2 (> 0), the tyres' limit (see above). None, or a
         value of ``m_brk`` or more: braking is linear in the pedal to ``-m_brk``.
+    brake_max : float
+        The deepest brake pedal the car holds, in (0, 1] (1: the full pedal). A car without
+        anti-lock brakes locks its wheels beyond some pedal, and a locked wheel steers nothing:
+        the map then ends there, so full brake (:meth:`full_brake`, :meth:`limits`) means
+        ``u_p = -brake_max`` and :meth:`pedal` never asks for more. Identification sets it from
+        the pedal its full stops held without locking.
     """
 
     m_0: float = 1.0
@@ -143,6 +149,7 @@ class PedalMap:
     m_brk: float = 9.0
     p_thr: float | None = None
     a_brk_max: float | None = None
+    brake_max: float = 1.0
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "m_0", as_float("PedalMap.m_0", self.m_0))
@@ -173,6 +180,13 @@ class PedalMap:
                     f"PedalMap.{name} must be > 0 {unit} (or None for no limit); got {value}."
                 )
             object.__setattr__(self, name, value)
+        brake_max = as_float("PedalMap.brake_max", self.brake_max)
+        if not 0.0 < brake_max <= 1.0:
+            raise ModelError(
+                f"PedalMap.brake_max must be in (0, 1] (the deepest brake pedal the car holds); "
+                f"got {brake_max}."
+            )
+        object.__setattr__(self, "brake_max", brake_max)
 
     # --- construction -----------------------------------------------------------------------------
     @classmethod
@@ -211,6 +225,7 @@ class PedalMap:
             "m_brk": self.m_brk,
             "p_thr": self.p_thr,
             "a_brk_max": self.a_brk_max,
+            "brake_max": self.brake_max,
         }
 
     @classmethod
@@ -313,8 +328,11 @@ class PedalMap:
     def full_brake(self) -> float:
         """Deceleration added by full brake, m/s^2.
 
-        ``a_brk_max`` if the tyres limit it, else ``m_brk``.
+        ``a_brk_max`` if the tyres limit it, else ``m_brk``; for a car whose wheels lock, the
+        deceleration at its deepest pedal ``-brake_max``.
         """
+        if self.brake_max < 1.0:
+            return -float(self._brake(np.float64(-self.brake_max)))
         return self.m_brk if self._brake_knee() is None else float(self.a_brk_max)
 
     def limits_at_speed(self, v_x: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
@@ -330,7 +348,7 @@ class PedalMap:
         return lo.reshape(v.shape), hi.reshape(v.shape)
 
     def pedal(self, a_x: ArrayLike, xi: ArrayLike) -> float | np.ndarray:
-        """Pedal ``u_p`` in [-1, 1] that produces ``a_x`` (m/s^2) in state(s) ``xi``; clipped.
+        """Pedal ``u_p`` in [-brake_max, 1] giving ``a_x`` (m/s^2) in state(s) ``xi``; clipped.
 
         Shapes as in :meth:`ax`; numpy only (the controller's last step).
         """
@@ -367,7 +385,7 @@ class PedalMap:
             u_brake = select(excess >= -a_k, u_brake, u_k + (excess + a_k) / slope)
         u_p = select(excess >= 0.0, excess / gain, u_brake)
         # Not np.clip: its Python wrapper costs more than the rest on a single value.
-        return fmin(fmax(u_p, -1.0), 1.0)
+        return fmin(fmax(u_p, -self.brake_max), 1.0)
 
 
 def _select(cond: bool, a: float, b: float) -> float:

@@ -203,7 +203,9 @@ def plan(
     _warn_if_large(track, key, spacing, say)
     params, options = model.planning_params(), model.options
     if key == "centerline":
-        traj = Trajectory.from_centerline(track, params, options=options, spacing=spacing)
+        traj = Trajectory.from_centerline(
+            track, params, options=options, spacing=spacing, v_top=model.v_top
+        )
         return PlanResult(traj.with_model(model), key, True, "ok", 0, time.perf_counter() - t0)
     cs = _with_grid(curvature_settings or CurvatureSettings(), spacing, model)
     if key == "curvature" or start == "warm":
@@ -243,10 +245,17 @@ _Settings = TypeVar("_Settings", CurvatureSettings, TimeOptimalSettings)
 
 
 def _with_grid(settings: _Settings, spacing: float, model: CarModel) -> _Settings:
-    """Planner settings with the node spacing (m) and, if the model has one, its edge margin."""
-    if model.edge_margin is None:
-        return dataclasses.replace(settings, spacing=spacing)
-    return dataclasses.replace(settings, spacing=spacing, margin=model.edge_margin)
+    """Planner settings with the node spacing (m) and the model's margin and top speed.
+
+    The model's edge margin (m) applies if it has one, its top speed (m/s) where the settings
+    leave it open.
+    """
+    changes: dict[str, float] = {"spacing": spacing}
+    if model.edge_margin is not None:
+        changes["margin"] = model.edge_margin
+    if settings.v_top is None:
+        changes["v_top"] = model.v_top
+    return dataclasses.replace(settings, **changes)
 
 
 __all__ = [

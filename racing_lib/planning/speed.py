@@ -30,12 +30,11 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from racing_lib.errors import PlanningError
+from racing_lib.model.car_model import DEFAULT_V_TOP
 from racing_lib.model.params import ModelOptions, ModelParams, PedalMap
 from racing_lib.model.states import X
 from racing_lib.vehicle.params import G, VehicleParams
 
-#: Top speed used when neither the caller nor the parameters give one: 190 km/h, m/s.
-DEFAULT_V_TOP = 190.0 / 3.6
 #: Where a parameter set leaves a value out: the planning model's defaults (the paper's table).
 _DEFAULTS = ModelParams()
 

@@ -66,11 +66,12 @@ from racing_lib.planning.curvature import solve_curvature, steady_cornering
 from racing_lib.planning.curvature_settings import CurvatureResult, CurvatureSettings
 from racing_lib.planning.grid import TrackGrid
 from racing_lib.planning.ipopt import ipopt_solver, option_advice
-from racing_lib.planning.speed import speed_profile
+from racing_lib.planning.speed import DEFAULT_V_TOP, speed_profile
 from racing_lib.planning.time_optimal_nlp import (
     NLP_SCALE,
     NLP_VARS,
     NXS,
+    SPEED_SCALE,
     StructuredNLP,
     interval_functions,
 )
@@ -131,7 +132,7 @@ def _shape_settings(st: TimeOptimalSettings) -> TimeOptimalSettings:
     The others are reset to their defaults, so that settings that differ only in solver options,
     grid or bounds share one cached set of interval functions.
     """
-    shaping = ("w_ddelta", "slip_limit", "slip_force_share", "friction_ellipse")
+    shaping = ("w_ddelta", "w_dax", "slip_limit", "slip_force_share", "friction_ellipse")
     shaping += ("drive_axle_circle", "pedal_limits")
     kept = {name: getattr(st, name) for name in shaping}
     # Only the structured graph calls the derivative functions: the others need no compiler run.
@@ -156,8 +157,15 @@ class _Problem:
             "time_optimal", nlp.nlp, st, nlp.derivatives, defaults=STARTING_BARRIER
         )
         self.lbg, self.ubg = nlp.lbg, nlp.ubg
+        self.speed_rows = nlp.speed_rows
         self.lap_fn = nlp.lap_fn
         self.build_time = time.perf_counter() - t0
+
+    def speed_bounds(self, v_top: float) -> np.ndarray:
+        """The constraints' upper bounds with the car's speed capped at ``v_top`` (m/s)."""
+        ubg = self.ubg.copy()
+        ubg[self.speed_rows] = (v_top / SPEED_SCALE) ** 2
+        return ubg
 
     def bounds(
         self, ax_lo: np.ndarray, ax_hi: np.ndarray, v_top: float
@@ -338,7 +346,7 @@ def solve_time_optimal(
     """
     st = settings or TimeOptimalSettings()
     params, _, options = model_inputs(params, None, options, "solve_time_optimal")
-    v_top = float(st.v_top) if st.v_top is not None else 190.0 / 3.6
+    v_top = float(st.v_top) if st.v_top is not None else DEFAULT_V_TOP
     grid = TrackGrid.from_track(track, st.spacing, st.car_width, st.margin)
     _check_friction(track, grid, params, options, st, v_top)
     if isinstance(start, str) and start == "warm":
@@ -518,7 +526,7 @@ def _solve_with_ax_limits(
         lbx, ubx = prob.bounds(lo_prev, hi_prev, v_top)
         x0 = np.clip(x0, lbx, ubx)
         t0 = time.perf_counter()
-        sol = prob.solver(x0=x0, lbx=lbx, ubx=ubx, lbg=prob.lbg, ubg=prob.ubg)
+        sol = prob.solver(x0=x0, lbx=lbx, ubx=ubx, lbg=prob.lbg, ubg=prob.speed_bounds(v_top))
         out.solve_time += time.perf_counter() - t0
         stats = prob.solver.stats()
         out.evaluation_time += sum(v for k, v in stats.items() if k.startswith("t_wall_nlp_"))

@@ -185,14 +185,17 @@ class IdentificationResult:
         -----
         The steering actuator is the identified one: its lag ``steer_tau`` (s), its rate limit
         ``steer_rate_max`` (rad/s) when the steering-rate manoeuvre found one, and the data
-        sheet's angle limit ``steer_max`` (rad) when it was given to :func:`identify`; what was
-        not identified keeps :class:`~racing_lib.model.CarModel`'s default.
+        sheet's angle limit ``steer_max`` (rad) when it was given to :func:`identify`; the top
+        speed ``v_top`` (m/s) is the one the full-throttle run reached. What was not identified
+        keeps :class:`~racing_lib.model.CarModel`'s default.
         """
         actuator: dict[str, Any] = {"steer_tau": self.steer_tau}
         if math.isfinite(self.steer_rate_max):
             actuator["steer_rate_max"] = self.steer_rate_max
         if self.steer_max is not None:
             actuator["steer_max"] = self.steer_max
+        if math.isfinite(self.v_top):
+            actuator["v_top"] = self.v_top
         return CarModel(self.params, grip_margin=grip_margin, **(actuator | fields))
 
     def value(self, name: str) -> float:
@@ -390,9 +393,19 @@ def _fit_all(
     fitted = kp.replace(**{k: v for k, v in tyres.items() if k != "steer_tau"}, **resist)
     pedal, f3 = _fit_pedal(fitted, S, fyf_sin)
     fits |= f3
-    a_brk_max, brake_note = _fit_brake_limit(fitted, S, fyf_sin)
+    a_brk_max, brake_max, brake_note = _fit_brake_limit(fitted, S, fyf_sin)
     notes.append(brake_note)
-    pedal = dataclasses.replace(pedal, a_brk_max=a_brk_max)
+    if brake_max < 1.0:
+        # The wheels lock beyond brake_max: braking is linear up to there (the map's slope
+        # m_brk), and the controller never brakes deeper. A knee towards a_brk_max would make
+        # the map ask for deeper pedals than the car holds.
+        pedal = dataclasses.replace(pedal, brake_max=brake_max)
+        notes.append(
+            f"the wheels lock beyond pedal -{brake_max:.2f}: the map ends there "
+            f"({pedal.full_brake():.2f} m/s^2 at pedal -{brake_max:.2f})"
+        )
+    else:
+        pedal = dataclasses.replace(pedal, a_brk_max=a_brk_max)
     fitted = fitted.replace(pedal=pedal)
     return fitted, tyres, fits, notes
 
@@ -467,6 +480,7 @@ _REPORT_SPEC = (
     ("pedal m_brk", "m/s^2", "laps+steps"),
     ("pedal p_thr", "W/kg", "laps+steps"),
     ("pedal a_brk_max", "m/s^2", "braking"),
+    ("pedal brake_max", "-", "braking"),
     ("steer_rate_max", "rad/s", "steering-rate"),
     ("p_thr (full throttle)", "W/kg", "full-throttle"),
     ("top speed", "m/s", "full-throttle"),
@@ -507,6 +521,7 @@ def _report_rows(
         "pedal m_brk": pedal.m_brk,
         "pedal p_thr": pedal.p_thr if pedal.p_thr is not None else float("nan"),
         "pedal a_brk_max": pedal.a_brk_max if pedal.a_brk_max is not None else float("nan"),
+        "pedal brake_max": pedal.brake_max,
     }
     fit_of = {
         "coast-down": f"RMS {fits['coast-down'].rms:.3g} m/s^2",

@@ -224,14 +224,17 @@ def _fit_pedal(
     return pedal, stats
 
 
-def _fit_brake_limit(kp: ModelParams, S: _Samples, fyf_sin: np.ndarray) -> tuple[float | None, str]:
-    """Step 4b: the tyres' deceleration limit (m/s^2) from the full stops, or None without them.
+def _fit_brake_limit(
+    kp: ModelParams, S: _Samples, fyf_sin: np.ndarray
+) -> tuple[float | None, float, str]:
+    """Step 4b: the braking limit from the full stops: ``(a_brk_max, brake_max, note)``.
 
-    The median tyre deceleration over the full-brake samples above 10 m/s (below, the brakes
-    fade out towards standstill). A stop whose wheels locked was backed off by the manoeuvre's
-    watchdog to a lighter brake (:class:`~racing_lib.experiments.sysid.ManoeuvreSettings`):
-    "full" is then the strongest brake each stop held, and the limit the deceleration the car
-    gives short of lock-up.
+    ``a_brk_max`` is the median tyre deceleration (m/s^2) over the full-brake samples above
+    10 m/s (below, the brakes fade out towards standstill), None without them. A stop whose
+    wheels locked was backed off by the manoeuvre's watchdog to a lighter brake
+    (:class:`~racing_lib.experiments.sysid.ManoeuvreSettings`): "full" is then the strongest brake
+    each stop held, ``brake_max`` (in (0, 1]) that pedal's depth, and the limit the deceleration
+    the car gives short of lock-up. ``brake_max`` is 1 when the full pedal held.
     """
     idx = np.flatnonzero(_full_brake(S) & S.valid & (S.vx > 10.0))
     if idx.size < _MIN_SAMPLES:
@@ -241,18 +244,27 @@ def _fit_brake_limit(kp: ModelParams, S: _Samples, fyf_sin: np.ndarray) -> tuple
             if ran
             else "add the 'braking' manoeuvre to bound a_min by the tyres"
         )
-        return None, (
-            f"no braking limit: {idx.size} full-brake samples above 10 m/s (need >= "
-            f"{_MIN_SAMPLES}); {todo}"
+        return (
+            None,
+            1.0,
+            (
+                f"no braking limit: {idx.size} full-brake samples above 10 m/s (need >= "
+                f"{_MIN_SAMPLES}); {todo}"
+            ),
         )
     decel = -_tyre_ax(kp, _subset(S, idx), fyf_sin[idx])
     limit = float(np.median(decel))
     spread = float(np.percentile(decel, 90) - np.percentile(decel, 10))
     pedal = float(np.max(S.pedal[idx]))
-    held = "" if pedal <= -0.999 else f" at pedal {pedal:.2f} or harder (backed off from lock-up)"
-    return limit, (
-        f"braking limit {limit:.2f} m/s^2 from {idx.size} full-brake samples{held} "
-        f"(10-90 % spread {spread:.2f} m/s^2)"
+    locked = pedal > -0.999
+    held = f" at pedal {pedal:.2f} or harder (backed off from lock-up)" if locked else ""
+    return (
+        limit,
+        (-pedal if locked else 1.0),
+        (
+            f"braking limit {limit:.2f} m/s^2 from {idx.size} full-brake samples{held} "
+            f"(10-90 % spread {spread:.2f} m/s^2)"
+        ),
     )
 
 
