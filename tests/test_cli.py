@@ -130,3 +130,18 @@ def test_the_parsers_controller_names_are_the_librarys():
     from racing_lib.face import cli
 
     assert cli.CONTROLLERS == CONTROLLER_NAMES
+
+
+@pytest.mark.parametrize(
+    ("argv", "says"),
+    [
+        (["lap", "--car", "bmw"], "commonroad:vehicle2"),  # the known names, before any work
+        (["lap", "--car", "sim", "--no-drag"], "--no-drag"),  # its own model, not the flags
+    ],
+)
+def test_a_car_the_lap_cannot_drive_is_one_clear_error(capsys, argv, says):
+    code = main(argv)
+    err = capsys.readouterr().err
+    assert code == 2
+    assert err.startswith("error:") and says in err
+    assert "Traceback" not in err and "identifying" not in err

@@ -90,6 +90,17 @@ def test_power_limit_and_braking_limit_are_identified(result):
     # car's straight-line stop gives (mu = 1.25, load sensitivity and brake balance cost some).
     assert pedal.a_brk_max < pedal.m_brk
     assert 0.9 * truth.g < pedal.a_brk_max < truth.mu * truth.g
+    # Anti-lock brakes: the full pedal held, so the map reaches it.
+    assert pedal.brake_max == 1.0
+
+
+def test_a_top_speed_still_rising_does_not_bound_the_plans(result):
+    # The simulated car still gains speed when its full-throttle run ends: no governed top
+    # speed, so its model keeps the default one.
+    from racing_lib.model import DEFAULT_V_TOP
+
+    assert math.isfinite(result.v_top) and not result.v_top_governed
+    assert result.car_model().v_top == DEFAULT_V_TOP
 
 
 def test_report_lists_fitted_and_true_values(result):

@@ -393,12 +393,16 @@ def run_trials(
 
 
 # --------------------------------------------------------------------------------------------------
-# One lap of the simulated car, described by plain data (so trials can run in other processes)
+# One lap, described by plain data (so trials can run in other processes)
+
+
+#: A car as a factory: the plant on ``track`` at ``start_speed`` (m/s), at the track's start.
+PlantFactory = Callable[[Track, float], Plant]
 
 
 @dataclass(frozen=True)
 class LapSpec:
-    """Everything that defines a lap of the simulated car, as picklable data.
+    """Everything that defines a lap (of the simulated car, or of another), as picklable data.
 
     Attributes
     ----------
@@ -416,10 +420,15 @@ class LapSpec:
     run_up : float
         The car starts this far before the start/finish line, on the plan, at its speed, m.
     vehicle : VehicleParams or None
-        The simulated car's true parameters (default car when None).
+        The simulated car's true parameters (default car when None); ignored with ``car``.
     model : CarModel or None
         The model the MPC predicts with; None: the one the trajectory carries (the model it was
         planned with).
+    car : callable ``(track, start_speed) -> Plant``, optional
+        Another car than the simulated one, as a picklable factory (the ``make_plant`` of a
+        :class:`~racing_lib.experiments.sysid.CarUnderTest`, e.g.
+        :class:`racing_lib.plants.commonroad.CommonRoadAt`). Its plant must offer
+        ``set_state(x, y, psi, vx)`` for the flying start.
     """
 
     track: Track
@@ -430,12 +439,14 @@ class LapSpec:
     run_up: float = 150.0
     vehicle: VehicleParams | None = None
     model: CarModel | None = None
+    car: PlantFactory | None = None
 
 
 class _StartOnPlan:
-    """A simulated car whose reset puts it on the plan ``run_up`` before the line (flying start)."""
+    """A car whose reset puts it on the plan ``run_up`` before the line (flying start)."""
 
-    def __init__(self, car: SimulatedCar, pose: tuple[float, float, float, float]) -> None:
+    # Any: a SimulatedCar or a foreign plant with the same set_state (CommonRoadCar).
+    def __init__(self, car: Any, pose: tuple[float, float, float, float]) -> None:
         self._car = car
         self._pose = pose
         self.dt = car.dt
@@ -454,13 +465,30 @@ class _StartOnPlan:
 
 
 def make_car(spec: LapSpec) -> Plant:
-    """The simulated car of ``spec``, starting ``spec.run_up`` m before the line, on the plan."""
+    """The car of ``spec``, starting ``spec.run_up`` m before the line, on the plan.
+
+    The simulated car (``spec.vehicle``), or the plant ``spec.car`` makes.
+
+    Raises
+    ------
+    PlantError
+        ``spec.car`` made a plant without ``set_state``, so it cannot be put on the plan.
+    """
     traj = spec.trajectory
     s0 = (traj.path.length - spec.run_up) % traj.path.length
     x0, y0 = traj.path.position(s0)
     psi0 = float(np.asarray(traj.path.heading(s0)))
     v0 = float(np.interp(s0, traj.s, traj.vx, period=traj.path.length))
-    car = SimulatedCar(spec.track, params=spec.vehicle, start_speed=v0)
+    if spec.car is None:
+        car: Any = SimulatedCar(spec.track, params=spec.vehicle, start_speed=v0)
+    else:
+        car = spec.car(spec.track, v0)
+        if not callable(getattr(car, "set_state", None)):
+            raise PlantError(
+                f"the car's plant {type(car).__name__} has no set_state(x, y, psi, vx), so a lap "
+                "cannot start it on the plan at speed; add one (the flying start of every lap "
+                "needs it), or drive it with run_lap from a standing start of your own."
+            )
     return _StartOnPlan(car, (float(x0), float(y0), psi0, v0))
 
 
@@ -477,7 +505,7 @@ def make_controller(spec: LapSpec) -> Controller:
 
 
 def drive_lap(spec: LapSpec, seed: int | None = None, progress: bool = False) -> LapResult:
-    """Drive one flying lap of the simulated car as ``spec`` describes.
+    """Drive one flying lap of the car as ``spec`` describes (the simulated car by default).
 
     Parameters
     ----------

@@ -52,6 +52,7 @@ from racing_lib.experiments.lap import (
     LapMetrics,
     LapResult,
     LapSpec,
+    PlantFactory,
     drive_lap,
     summarize,
 )
@@ -220,7 +221,8 @@ class RaceResult:
             )
         )
         width = max(len(k) for k, _ in rows)
-        title = f"{self.track.name}: {n} lap{'s' if n > 1 else ''} of the simulated car"
+        car = "the simulated car" if self.spec.car is None else str(self.spec.car)
+        title = f"{self.track.name}: {n} lap{'s' if n > 1 else ''} of {car}"
         return "\n".join([title] + [f"  {k:<{width}}  {v}" for k, v in rows])
 
     def __str__(self) -> str:
@@ -330,6 +332,7 @@ def race(
     *,
     trials: int = 1,
     model: CarModel | None = None,
+    car: PlantFactory | None = None,
     smooth_transition: bool = True,
     reference: Trajectory | str | os.PathLike[str] | None = None,
     # Any: passed on to racing_lib.planning.plan, whose keywords have different types.
@@ -338,7 +341,7 @@ def race(
     report: Callable[[str], None] | None = None,
     on_lap: Callable[[LapResult], None] | None = None,
 ) -> RaceResult:
-    """Plan a lap of a track and drive it in closed loop with the simulated car.
+    """Plan a lap of a track and drive it in closed loop with the simulated car (or another).
 
     The three modules of the paper in one call: the planning model (identified from driving
     data, chapter 02), the planner (chapters 03-04) and the tracking controller (chapter 05),
@@ -370,6 +373,10 @@ def race(
         actuator and margins. Default: the plan's own model when a ``reference`` carries one,
         else :func:`racing_lib.model.identified_model` (the shipped fit, drag and longitudinal
         weight transfer as in the paper's main experiment, a 5 % grip margin).
+    car : callable ``(track, start_speed) -> Plant``, optional
+        The car to drive instead of the simulated one (``LapSpec.car``; for a car identified
+        and raced in one call see :func:`racing_lib.experiments.own_car.race_car`). Plan it with
+        its own identified ``model``.
     smooth_transition : bool
         MPC: linearize along the blend from the measured state to the plan (the paper's choice).
     reference : Trajectory or path, optional
@@ -450,6 +457,7 @@ def race(
         smooth_transition=smooth_transition,
         weights=lap_weights,
         model=model,
+        car=car,
     )
     laps = []
     for i in range(int(trials)):

@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from racing_lib.errors import RacingLibError
+from racing_lib.errors import ArgumentError, RacingLibError
 from racing_lib.face.output_places import (
     check_output_dir,
     check_output_file,
@@ -26,6 +26,7 @@ from racing_lib.face.output_places import (
 from racing_lib.io import atomic_savefig, atomic_write_json, jsonable
 from racing_lib.model import CarModel, ModelOptions, identified_model
 from racing_lib.planning import METHODS, STARTS, TimeOptimalSettings, plan
+from racing_lib.plants import CARS
 
 # The parser needs only the modules above (racing_lib.model and racing_lib.planning give its
 # choices; numpy and racing_lib.io are loaded with them). Each command imports the rest of what it
@@ -173,20 +174,22 @@ def cmd_lap(args: argparse.Namespace) -> int:
             out_dir.mkdir(parents=True, exist_ok=True)
             lap.log.save(str(out_dir / f"log_seed{lap.metrics.seed}.npz"))
 
-    result = race(
-        args.track,
+    common = dict(
         plan_kwargs=_plan_kwargs(args),
         method=args.method,
         controller=args.controller,
         seed=args.seed,
         trials=args.trials,
-        model=_model(args),
         smooth_transition=not args.no_smooth_transition,
         reference=args.plan,
         progress=not args.json and args.trials == 1,
         report=_say,
         on_lap=save_log,
     )
+    if args.car is None:
+        result = race(args.track, model=_model(args), **common)
+    else:
+        result = _race_named_car(args, common)
     report = result.summary()
     if out_dir is not None:
         _save_lap_outputs(out_dir, result.track, result.reference, result.laps, report)
@@ -196,6 +199,21 @@ def cmd_lap(args: argparse.Namespace) -> int:
     else:
         _print_summary(report)
     return 0 if result.completed else 1
+
+
+def _race_named_car(args: argparse.Namespace, common: dict[str, Any]) -> Any:
+    """``lap --car NAME``: identify the car (cached), plan with its model, race it."""
+    from racing_lib.experiments.own_car import race_car
+
+    flags = [
+        f for f in ("no_drag", "no_weight_transfer", "lateral_weight_transfer") if getattr(args, f)
+    ]
+    if flags:
+        raise ArgumentError(
+            f"--car plans with the car's own identified model, so "
+            f"{', '.join('--' + f.replace('_', '-') for f in flags)} cannot apply; drop them."
+        )
+    return race_car(args.car, args.track, refresh=args.reidentify, **common)
 
 
 def _print_summary(report: dict[str, Any]) -> None:
@@ -539,6 +557,16 @@ def build_parser() -> argparse.ArgumentParser:
         "--no-smooth-transition",
         action="store_true",
         help="MPC ablation: linearize along the reference itself",
+    )
+    p.add_argument(
+        "--car",
+        help="drive another car than the simulated one: identify it (kept in ~/.cache/"
+        "racing-lib/cars), plan with its model and race it; one of: " + ", ".join(CARS),
+    )
+    p.add_argument(
+        "--reidentify",
+        action="store_true",
+        help="with --car: identify the car anew instead of reading its kept model",
     )
     p.add_argument("--trials", type=int, default=1, help="number of seeded trials (default 1)")
     p.add_argument("--seed", type=int, default=0, help="seed of the first trial (default 0)")

@@ -19,4 +19,13 @@ The modules are imported on demand (``from racing_lib.plants.commonroad import C
 so that this package imports without the optional extras.
 """
 
-__all__: list[str] = []
+__all__ = ["CARS"]
+
+#: The cars known by name (``racing-lib lap --car NAME``,
+#: :func:`racing_lib.experiments.own_car.named_car`), with what each is.
+CARS = {
+    "sim": "the simulated car (racing_lib.sim), identified from its logs like any other car",
+    "commonroad:vehicle1": "CommonRoad's Ford Escort, single-track drift model (std)",
+    "commonroad:vehicle2": "CommonRoad's BMW 320i, single-track drift model (std)",
+    "commonroad:vehicle3": "CommonRoad's VW Vanagon, single-track drift model (std)",
+}

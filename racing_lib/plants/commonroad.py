@@ -601,6 +601,11 @@ class CommonRoadAt:
         self.vehicle = vehicle
         self.options = options
 
+    def __str__(self) -> str:
+        """The car's name in reports, e.g. ``CommonRoad vehicle 2``."""
+        what = self.vehicle if isinstance(self.vehicle, int) else "(own parameters)"
+        return f"CommonRoad vehicle {what}"
+
     def __call__(self, track: Track, start_speed: float) -> CommonRoadCar:
         """The car at arc length 0 of ``track``, heading along it, at ``start_speed`` m/s."""
         return CommonRoadCar(track, self.vehicle, start_s=0.0, start_speed=start_speed,

@@ -132,6 +132,9 @@ class IdentificationResult:
         The data sheet's steering-angle limit, rad (passed through; None: not given).
     v_top : float
         Top speed reached at full throttle, m/s (``nan``: no full-throttle manoeuvre).
+    v_top_governed : bool
+        The car stopped accelerating at ``v_top`` (a governed top speed, which plans must keep
+        below), rather than the run ending while it still gained speed.
     """
 
     params: ModelParams
@@ -144,6 +147,7 @@ class IdentificationResult:
     steer_rate_max: float = math.nan
     steer_max: float | None = None
     v_top: float = math.nan
+    v_top_governed: bool = False
 
     @property
     def success(self) -> bool:
@@ -186,15 +190,15 @@ class IdentificationResult:
         The steering actuator is the identified one: its lag ``steer_tau`` (s), its rate limit
         ``steer_rate_max`` (rad/s) when the steering-rate manoeuvre found one, and the data
         sheet's angle limit ``steer_max`` (rad) when it was given to :func:`identify`; the top
-        speed ``v_top`` (m/s) is the one the full-throttle run reached. What was not identified
-        keeps :class:`~racing_lib.model.CarModel`'s default.
+        speed ``v_top`` (m/s) where the full-throttle run found a governed one. What was not
+        identified keeps :class:`~racing_lib.model.CarModel`'s default.
         """
         actuator: dict[str, Any] = {"steer_tau": self.steer_tau}
         if math.isfinite(self.steer_rate_max):
             actuator["steer_rate_max"] = self.steer_rate_max
         if self.steer_max is not None:
             actuator["steer_max"] = self.steer_max
-        if math.isfinite(self.v_top):
+        if self.v_top_governed and math.isfinite(self.v_top):
             actuator["v_top"] = self.v_top
         return CarModel(self.params, grip_margin=grip_margin, **(actuator | fields))
 
@@ -333,6 +337,7 @@ def identify(
         steer_rate_max=limits["steer_rate_max"],
         steer_max=None if sheet_steer is None else float(sheet_steer),
         v_top=limits["top speed"],
+        v_top_governed=bool(limits["top speed governed"]),
     )
 
 
@@ -455,6 +460,7 @@ def _fit_limits(
         "steer_rate_max": rate,
         "p_thr (full throttle)": full["p_thr"],
         "top speed": full["v_top"],
+        "top speed governed": full["governed"],
     }
 
 

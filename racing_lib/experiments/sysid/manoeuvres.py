@@ -172,6 +172,9 @@ class _SimulatedCarAt:
     def __init__(self, params: VehicleParams) -> None:
         self.params = params
 
+    def __str__(self) -> str:
+        return "the simulated car"
+
     def __call__(self, track: Track, start_speed: float) -> Plant:
         return SimulatedCar(track, self.params, dt=0.1, start_s=0.0, start_speed=start_speed)
 
