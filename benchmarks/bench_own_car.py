@@ -28,6 +28,7 @@ import warnings
 
 from _script import argument_parser, run, tracks_to_measure
 
+from racing_lib.errors import PlantError
 from racing_lib.experiments.lap import LapSpec, drive_lap
 from racing_lib.experiments.sysid import CarUnderTest, collect_logs, identify
 from racing_lib.model import CarModel, ModelMismatchWarning
@@ -68,9 +69,7 @@ def drive(spec: LapSpec, seeds: list[int]) -> dict[str, float]:
     for seed in seeds:
         try:
             m = drive_lap(spec, seed=seed).metrics
-        except Exception as exc:  # a spin ends the lap: count it, as the car's fate
-            if "spun" not in str(exc) and "diverged" not in str(exc):
-                raise
+        except PlantError:  # the car spun or diverged: the lap is lost, counted as not completed
             continue
         done += int(m.completed)
         walls += m.wall_contacts

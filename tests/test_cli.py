@@ -137,6 +137,9 @@ def test_the_parsers_controller_names_are_the_librarys():
     [
         (["lap", "--car", "bmw"], "commonroad:vehicle2"),  # the known names, before any work
         (["lap", "--car", "sim", "--no-drag"], "--no-drag"),  # its own model, not the flags
+        (["lap", "--reidentify"], "--car"),  # a flag of --car, without it
+        (["lap", "--car", "sim", "--speed-scale", "0"], "(0, 1]"),
+        (["lap", "--car", "sim", "--track", "nurburgring"], "expressway"),  # before identifying
     ],
 )
 def test_a_car_the_lap_cannot_drive_is_one_clear_error(capsys, argv, says):

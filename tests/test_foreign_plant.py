@@ -9,6 +9,7 @@ with the identified parameters, and those parameters travel with the lap specifi
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -335,8 +336,19 @@ def test_an_identified_car_is_kept_and_read_back(tmp_path, monkeypatch):
     again = own_car.identify_car(car, fast=True, cache_dir=tmp_path, report=lines.append)
     assert again == first
     assert any("from" in line and str(tmp_path) in line for line in lines)
-    # A cache file of another car (or damaged) is not trusted: the car is identified anew.
+    # A damaged file is not trusted: the car is identified anew.
     path = next(tmp_path.glob("*.json"))
     path.write_text("{not json", encoding="utf-8")
     with pytest.raises(AssertionError, match="identified anew"):
         own_car.identify_car(car, fast=True, cache_dir=tmp_path)
+    # Nor is a model of the same name made for another data sheet, or with other manoeuvres.
+    path.unlink()
+    monkeypatch.undo()
+    own_car.identify_car(car, fast=True, cache_dir=tmp_path)
+    monkeypatch.setattr(own_car, "collect_logs", no_driving)
+    edited = own_car.NamedCar(
+        car.name, dataclasses.replace(car.car, known=car.car.known.replace(m=1200.0))
+    )
+    for other, seed in ((edited, 0), (car, 1)):
+        with pytest.raises(AssertionError, match="identified anew"):
+            own_car.identify_car(other, seed=seed, fast=True, cache_dir=tmp_path)

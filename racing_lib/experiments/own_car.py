@@ -8,7 +8,9 @@ for a car named on the command line (``racing-lib lap --car commonroad:vehicle2`
 1. :func:`identify_car` drives the manoeuvres of :func:`racing_lib.experiments.sysid.collect_logs`
    and fits the model (:func:`racing_lib.experiments.sysid.identify`), then keeps the resulting
    :class:`~racing_lib.model.CarModel` in a JSON file, so the next run of the same car starts
-   from it (a few seconds saved for CommonRoad's cars, minutes for a slow simulator);
+   from it (a few seconds saved for CommonRoad's cars, minutes for a slow simulator). The file is
+   named by a fingerprint of the car, its data sheet, the manoeuvres and the identification's
+   code, so an edited car or a newer racing_lib is identified anew;
 2. :func:`racing_lib.experiments.pipeline.race` plans with that model and drives the car's own
    plant (``LapSpec.car``) with the MPC predicting with it.
 
@@ -19,6 +21,8 @@ the package's parameter sets; the ``[commonroad]`` extra).
 
 from __future__ import annotations
 
+import dataclasses
+import hashlib
 import json
 import os
 from collections.abc import Callable
@@ -32,7 +36,10 @@ from racing_lib.experiments.pipeline import RaceResult, race
 from racing_lib.experiments.sysid import CarUnderTest, collect_logs, identify, simulated_car
 from racing_lib.io import atomic_write_json
 from racing_lib.model import CarModel, ModelParams
+from racing_lib.planning import plan
 from racing_lib.plants import CARS
+from racing_lib.provenance import code_digest
+from racing_lib.tracks import load_track
 
 __all__ = ["CARS", "NamedCar", "car_cache_dir", "identify_car", "named_car", "race_car"]
 
@@ -92,9 +99,39 @@ def car_cache_dir() -> Path:
     return Path(base) / "racing-lib" / "cars"
 
 
-def _cache_file(folder: Path, name: str, seed: int, fast: bool) -> Path:
-    safe = "".join(c if c.isalnum() or c in "-_" else "-" for c in name)
-    return folder / f"{safe}-seed{seed}-{'fast' if fast else 'full'}.json"
+def _fingerprint(car: NamedCar, seed: int, fast: bool) -> str:
+    """What the identified model depends on, hashed (16 hex characters).
+
+    The car (its name, plant factory as it describes itself, data sheet and steering limit), the
+    manoeuvres (seed, fast or full) and the code that drives and fits them: change any of these
+    and the kept model no longer applies, so the car is identified anew.
+    """
+    known = car.car.known
+    sheet = known.to_dict() if hasattr(known, "to_dict") else dataclasses.asdict(known)
+    inputs = {
+        "car": car.name,
+        "plant": _describe(car.car.make_plant),
+        "known": sheet,
+        "steer_max": car.steer_max,
+        "seed": seed,
+        "fast": fast,
+        "code": code_digest(("racing_lib.experiments.sysid",)),
+    }
+    text = json.dumps(inputs, sort_keys=True, default=str)
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def _describe(factory: object) -> dict[str, object]:
+    """A plant factory as data: its class or function name, its text and its attributes."""
+    kind = type(factory)
+    name = getattr(factory, "__qualname__", None) or f"{kind.__module__}.{kind.__qualname__}"
+    attributes = vars(factory) if hasattr(factory, "__dict__") else {}
+    return {"name": name, "text": str(factory), "attributes": attributes}
+
+
+def _cache_file(folder: Path, car: NamedCar, fingerprint: str) -> Path:
+    safe = "".join(c if c.isalnum() or c in "-_" else "-" for c in car.name)
+    return folder / f"{safe}-{fingerprint}.json"
 
 
 def identify_car(
@@ -137,12 +174,14 @@ def identify_car(
     """
     say = report or (lambda _line: None)
     fast = fast_mode() if fast is None else bool(fast)
-    path = _cache_file(Path(cache_dir or car_cache_dir()), car.name, seed, fast)
+    fingerprint = _fingerprint(car, seed, fast)
+    path = _cache_file(Path(cache_dir or car_cache_dir()), car, fingerprint)
     if path.exists() and not refresh:
-        model = _read_cache(path, car.name)
+        model = _read_cache(path, fingerprint)
         if model is not None:
             say(f"identified model of {car.name} from {path}")
             return model
+        say(f"{path} is damaged or of another car or version: identifying anew")
     say(f"identifying {car.name}: driving the manoeuvres ({'fast' if fast else 'full'} set) ...")
     logs = collect_logs(seed=seed, fast=fast, car=car.car)
     known = car.car.known
@@ -156,26 +195,27 @@ def identify_car(
             "(collect_logs(fast=False)), or check the car's plant for noise or faults."
         )
     model = result.car_model()
-    record = {"format": _CACHE_FORMAT, "car": car.name, "seed": seed, "fast": fast}
+    record = {"format": _CACHE_FORMAT, "car": car.name, "fingerprint": fingerprint}
+    record |= {"seed": seed, "fast": fast}
     record |= {"model": model.to_dict(), "report": result.report()}
     atomic_write_json(path, record)
     say(f"identified model of {car.name} kept in {path}")
     return model
 
 
-def _read_cache(path: Path, name: str) -> CarModel | None:
-    """The model of a cache file, or None when the file is of another format or car."""
+def _read_cache(path: Path, fingerprint: str) -> CarModel | None:
+    """The model of a cache file, or None when it is damaged or made for something else."""
     try:
         record = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, ValueError):
         return None
     if not isinstance(record, dict) or record.get("format") != _CACHE_FORMAT:
         return None
-    if record.get("car") != name:
+    if record.get("fingerprint") != fingerprint:
         return None
     try:
         return CarModel.from_dict(record["model"])
-    except (KeyError, ModelError):
+    except (KeyError, TypeError, ValueError, ModelError):
         return None
 
 
@@ -185,6 +225,8 @@ def race_car(
     *,
     seed: int = 0,
     trials: int = 1,
+    speed_scale: float = 1.0,
+    identify_seed: int = 0,
     fast: bool | None = None,
     cache_dir: str | os.PathLike[str] | None = None,
     refresh: bool = False,
@@ -201,7 +243,13 @@ def race_car(
     track : str, path or Track
         As for :func:`~racing_lib.experiments.pipeline.race`.
     seed, trials : int
-        Seed of the first lap (and of the manoeuvres) and the number of laps.
+        Seed of the first lap and the number of laps.
+    speed_scale : float
+        Drive the plan at this share of its speeds, in (0, 1] (1: the plan as it is). A car the
+        controller cannot yet hold at the plan's speeds laps at a lower share.
+    identify_seed : int
+        Seed of the identification's manoeuvres (kept apart from the laps' ``seed``, so that laps
+        of several seeds are driven with one model).
     fast, cache_dir, refresh : optional
         As for :func:`identify_car`.
     report : callable, optional
@@ -220,11 +268,22 @@ def race_car(
             f"car must be a name ({', '.join(sorted(CARS))}) or a NamedCar, got "
             f"{type(car).__name__}."
         )
+    if not (isinstance(speed_scale, int | float) and 0.0 < speed_scale <= 1.0):
+        raise ArgumentError(f"speed_scale must be in (0, 1], got {speed_scale!r}.")
+    trk = load_track(track)  # a bad track is refused before the car is driven at all
     model = identify_car(
-        named, seed=seed, fast=fast, cache_dir=cache_dir, refresh=refresh, report=report
+        named, seed=identify_seed, fast=fast, cache_dir=cache_dir, refresh=refresh, report=report
     )
+    if speed_scale != 1.0 and race_kwargs.get("reference") is None:
+        say = report or (lambda _line: None)
+        plan_kwargs = dict(race_kwargs.pop("plan_kwargs", None) or {})
+        method = race_kwargs.pop("method", "time-optimal")
+        say(f"planning {trk.name} with method '{method}' ...")
+        planned = plan(trk, method, model, **plan_kwargs)
+        say(f"driving the plan ({planned.lap_time:.2f} s) at {speed_scale:.0%} of its speeds")
+        race_kwargs["reference"] = planned.trajectory.scale_speed(speed_scale)
     return race(
-        track,
+        trk,
         seed=seed,
         trials=trials,
         model=model,

@@ -221,7 +221,8 @@ class RaceResult:
             )
         )
         width = max(len(k) for k, _ in rows)
-        car = "the simulated car" if self.spec.car is None else str(self.spec.car)
+        car = self.spec.car
+        car = "the simulated car" if car is None else getattr(car, "__name__", None) or str(car)
         title = f"{self.track.name}: {n} lap{'s' if n > 1 else ''} of {car}"
         return "\n".join([title] + [f"  {k:<{width}}  {v}" for k, v in rows])
 

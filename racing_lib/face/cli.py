@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from racing_lib.errors import ArgumentError, RacingLibError
+from racing_lib.errors import PlantError, RacingLibError
 from racing_lib.face.output_places import (
     check_output_dir,
     check_output_file,
@@ -186,10 +186,16 @@ def cmd_lap(args: argparse.Namespace) -> int:
         report=_say,
         on_lap=save_log,
     )
-    if args.car is None:
-        result = race(args.track, model=_model(args), **common)
-    else:
-        result = _race_named_car(args, common)
+    try:
+        if args.car is None:
+            result = race(args.track, model=_model(args), **common)
+        else:
+            result = _race_named_car(args, common)
+    except PlantError as exc:
+        # The car's own fate (it spun, its state diverged), not a usage error: the lap was not
+        # completed, and the laps before it are saved.
+        print(f"lap not completed: {exc}", file=sys.stderr)
+        return 1
     report = result.summary()
     if out_dir is not None:
         _save_lap_outputs(out_dir, result.track, result.reference, result.laps, report)
@@ -205,15 +211,13 @@ def _race_named_car(args: argparse.Namespace, common: dict[str, Any]) -> Any:
     """``lap --car NAME``: identify the car (cached), plan with its model, race it."""
     from racing_lib.experiments.own_car import race_car
 
-    flags = [
-        f for f in ("no_drag", "no_weight_transfer", "lateral_weight_transfer") if getattr(args, f)
-    ]
-    if flags:
-        raise ArgumentError(
-            f"--car plans with the car's own identified model, so "
-            f"{', '.join('--' + f.replace('_', '-') for f in flags)} cannot apply; drop them."
-        )
-    return race_car(args.car, args.track, refresh=args.reidentify, **common)
+    return race_car(
+        args.car,
+        args.track,
+        refresh=args.reidentify,
+        speed_scale=args.speed_scale,
+        **common,
+    )
 
 
 def _print_summary(report: dict[str, Any]) -> None:
@@ -419,6 +423,34 @@ def _at_least(value: int | None, low: int, flag: str, why: str = "") -> None:
         raise RacingLibError(f"{flag} must be at least {low}, got {value}{why}.")
 
 
+def _check_car_flags(args: argparse.Namespace) -> None:
+    """``lap --car``: its own flags need it, and it plans with its own model."""
+    if args.command != "lap":
+        return
+    scale = args.speed_scale
+    if not (math.isfinite(scale) and 0.0 < scale <= 1.0):
+        raise RacingLibError(f"--speed-scale must be in (0, 1], got {scale}.")
+    if args.car is None:
+        if args.reidentify or scale != 1.0:
+            raise RacingLibError(
+                "--reidentify and --speed-scale go with --car (another car than the simulated "
+                "one); add --car NAME, or drop them."
+            )
+        return
+    model_flags = ("no_drag", "no_weight_transfer", "lateral_weight_transfer")
+    flags = [f for f in model_flags if getattr(args, f)]
+    if flags:
+        raise RacingLibError(
+            f"--car plans with the car's own identified model, so "
+            f"{', '.join('--' + f.replace('_', '-') for f in flags)} cannot apply; drop them."
+        )
+    if args.plan:
+        raise RacingLibError(
+            "--car plans with the car's own identified model, and --plan is a plan made with "
+            "another; drop --plan."
+        )
+
+
 def check_arguments(args: argparse.Namespace) -> None:
     """Every number and output place on the command line, checked before any work starts.
 
@@ -439,6 +471,7 @@ def check_arguments(args: argparse.Namespace) -> None:
             f"--spacing must be a node spacing between 0.5 and 20 m, got {spacing} (the "
             "planners are tuned for 3 m)."
         )
+    _check_car_flags(args)
     knobs = ("spacing", "start", "max_iter")
     if getattr(args, "plan", None) and any(getattr(args, k, None) is not None for k in knobs):
         raise RacingLibError(
@@ -567,6 +600,12 @@ def build_parser() -> argparse.ArgumentParser:
         "--reidentify",
         action="store_true",
         help="with --car: identify the car anew instead of reading its kept model",
+    )
+    p.add_argument(
+        "--speed-scale",
+        type=float,
+        default=1.0,
+        help="with --car: drive the plan at this share of its speeds, in (0, 1] (default 1)",
     )
     p.add_argument("--trials", type=int, default=1, help="number of seeded trials (default 1)")
     p.add_argument("--seed", type=int, default=0, help="seed of the first trial (default 0)")

@@ -149,8 +149,8 @@ class CarModel:
         """What changes the prediction between this model and ``other``, one text per field.
 
         Effects, steering actuator and parameters (``"drag: plan True, controller False"``,
-        ``"parameters mu, m"``); the margins are left out, since they are the planner's and do
-        not enter a controller's prediction. Empty when the two predict alike.
+        ``"parameters mu, m"``); the margins and the top speed are left out, since they are the
+        planner's and do not enter a controller's prediction. Empty when the two predict alike.
         """
         pairs = [(f.name, self.options, other.options) for f in dataclasses.fields(ModelOptions)]
         pairs += [(name, self, other) for name in ("steer_tau", "steer_max", "steer_rate_max")]

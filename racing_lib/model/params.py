@@ -134,7 +134,9 @@ class PedalMap:
         ``p_thr / v_x``. None: no power limit (the paper's linear map).
     a_brk_max : float or None
         Tyre deceleration at full brake, m/s^2 (> 0), the tyres' limit (see above). None, or a
-        value of ``m_brk`` or more: braking is linear in the pedal to ``-m_brk``.
+        value of ``m_brk`` or more: braking is linear in the pedal to ``-m_brk``. The knee's
+        bend always ends at ``u_p = -1``: with ``brake_max < 1`` the map stops before it, and
+        full brake gives less than ``a_brk_max`` (identification sets one or the other).
     brake_max : float
         The deepest brake pedal the car holds, in (0, 1] (1: the full pedal). A car without
         anti-lock brakes locks its wheels beyond some pedal, and a locked wheel steers nothing:
@@ -316,8 +318,9 @@ class PedalMap:
     def limits(self, xi: ArrayLike | ca.SX | ca.MX | ca.DM) -> tuple[Numeric, Numeric]:
         """``(a_min, a_max)`` in m/s^2 at full brake and full throttle for state(s) ``xi``.
 
-        ``(a_min, a_max)`` in m/s^2: ``a_x`` at full brake (``u_p=-1``) and full throttle
-        (``u_p=+1``) for state(s) ``xi`` of shape (6,) or (N, 6) (or CasADi columns).
+        ``(a_min, a_max)`` in m/s^2: ``a_x`` at full brake (``u_p = -brake_max``, the deepest
+        pedal the car holds) and full throttle (``u_p=+1``) for state(s) ``xi`` of shape (6,) or
+        (N, 6) (or CasADi columns).
         """
         base = self._base(xi)
         gain = self.throttle_gain(self._speed(xi))

@@ -144,9 +144,9 @@ def plan(
         The model to plan with: parameters, effects and margins (default:
         :func:`racing_lib.model.identified.identified_model`, the shipped fit with a grip margin
         of :data:`~racing_lib.model.identified.GRIP_MARGIN`). The planner sees the parameters
-        with the grip margin applied (:meth:`CarModel.planning_params`) and keeps the model's
-        edge margin, when it has one; the plan carries the model, so an MPC that tracks it
-        predicts with the same one.
+        with the grip margin applied (:meth:`CarModel.planning_params`), keeps the model's
+        edge margin, when it has one, and its top speed ``v_top`` (unless the settings give one);
+        the plan carries the model, so an MPC that tracks it predicts with the same one.
     spacing : float
         Node spacing along the centerline, m (overrides the settings' spacing).
     start : {'cold', 'warm'}

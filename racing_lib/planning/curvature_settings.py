@@ -43,7 +43,9 @@ class CurvatureSettings:
     delta_max : float
         Steering angle bound, rad.
     v_top : float or None
-        Top speed for the speed profile, m/s (None: 190 km/h).
+        Top speed for the speed profile, m/s. None: the model's top speed under
+        :func:`racing_lib.planning.plan` (``CarModel.v_top``), 190 km/h when the solver is called
+        directly. Given here, it replaces the model's.
     osqp_eps : float
         OSQP's absolute and relative tolerance (when ``solver="OSQP"``).
     solver : str

@@ -317,7 +317,11 @@ class StructuredNLP:
     derivatives : dict
         ``grad_f``, ``jac_g`` and ``hess_lag`` for ``nlpsol``'s options.
     lbg, ubg : numpy.ndarray
-        Constraint bounds, interval by interval.
+        Constraint bounds, interval by interval. The speed rows' upper bounds in ``ubg`` are
+        placeholders (a speed of :data:`SPEED_SCALE`): a solve sets them to the top speed
+        (``_Problem.speed_bounds``).
+    speed_rows : numpy.ndarray
+        Indices of the speed constraint of every interval in ``g``.
     """
 
     def __init__(

@@ -88,7 +88,9 @@ class TimeOptimalSettings:
     outer_tol : float
         The a_x limits have settled when they move less than this, m/s^2.
     v_top : float or None
-        Top speed (upper bound on v_x), m/s (None: 190 km/h).
+        Top speed, m/s: the bound on the car's speed ``sqrt(v_x^2 + v_y^2)``. None: the model's
+        top speed under :func:`racing_lib.planning.plan` (``CarModel.v_top``), 190 km/h when the
+        solver is called directly. Given here, it replaces the model's.
     print_level : int
         IPOPT's print level (0 silent).
     graph : {"structured", "sx", "mx"}
