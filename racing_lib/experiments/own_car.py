@@ -32,11 +32,10 @@ from typing import Any
 
 from racing_lib.config import fast_mode
 from racing_lib.errors import ArgumentError, ModelError
-from racing_lib.experiments.pipeline import RaceResult, race
+from racing_lib.experiments.pipeline import RaceResult, check_speed_scale, race
 from racing_lib.experiments.sysid import CarUnderTest, collect_logs, identify, simulated_car
 from racing_lib.io import atomic_write_json
 from racing_lib.model import CarModel, ModelParams
-from racing_lib.planning import plan
 from racing_lib.plants import CARS
 from racing_lib.provenance import code_digest
 from racing_lib.tracks import load_track
@@ -245,8 +244,8 @@ def race_car(
     seed, trials : int
         Seed of the first lap and the number of laps.
     speed_scale : float
-        Drive the plan at this share of its speeds, in (0, 1] (1: the plan as it is). A car the
-        controller cannot yet hold at the plan's speeds laps at a lower share.
+        As for :func:`~racing_lib.experiments.pipeline.race`: the share of the plan's speeds
+        driven, in (0, 1].
     identify_seed : int
         Seed of the identification's manoeuvres (kept apart from the laps' ``seed``, so that laps
         of several seeds are driven with one model).
@@ -268,26 +267,18 @@ def race_car(
             f"car must be a name ({', '.join(sorted(CARS))}) or a NamedCar, got "
             f"{type(car).__name__}."
         )
-    if not (isinstance(speed_scale, int | float) and 0.0 < speed_scale <= 1.0):
-        raise ArgumentError(f"speed_scale must be in (0, 1], got {speed_scale!r}.")
-    trk = load_track(track)  # a bad track is refused before the car is driven at all
+    check_speed_scale(speed_scale)  # bad input is refused before the car is driven at all
+    trk = load_track(track)
     model = identify_car(
         named, seed=identify_seed, fast=fast, cache_dir=cache_dir, refresh=refresh, report=report
     )
-    if speed_scale != 1.0 and race_kwargs.get("reference") is None:
-        say = report or (lambda _line: None)
-        plan_kwargs = dict(race_kwargs.pop("plan_kwargs", None) or {})
-        method = race_kwargs.pop("method", "time-optimal")
-        say(f"planning {trk.name} with method '{method}' ...")
-        planned = plan(trk, method, model, **plan_kwargs)
-        say(f"driving the plan ({planned.lap_time:.2f} s) at {speed_scale:.0%} of its speeds")
-        race_kwargs["reference"] = planned.trajectory.scale_speed(speed_scale)
     return race(
         trk,
         seed=seed,
         trials=trials,
         model=model,
         car=named.car.make_plant,
+        speed_scale=speed_scale,
         report=report,
         **race_kwargs,
     )

@@ -40,7 +40,7 @@ import os
 import warnings
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from numbers import Integral
+from numbers import Integral, Real
 from typing import Any
 
 import numpy as np
@@ -252,6 +252,15 @@ def _resolve_weights(
     return {str(k): float(v) for k, v in weights.items()}, "given", config
 
 
+def check_speed_scale(speed_scale: float) -> float:
+    """``speed_scale`` as a float in (0, 1], or :class:`ArgumentError` naming the range."""
+    if isinstance(speed_scale, bool) or not isinstance(speed_scale, Real):
+        raise ArgumentError(f"speed_scale must be a number in (0, 1], got {speed_scale!r}.")
+    if not 0.0 < speed_scale <= 1.0:
+        raise ArgumentError(f"speed_scale must be in (0, 1], got {speed_scale!r}.")
+    return float(speed_scale)
+
+
 def _check_choices(
     controller: str,
     weights: str | Mapping[str, float] | None,
@@ -334,6 +343,7 @@ def race(
     trials: int = 1,
     model: CarModel | None = None,
     car: PlantFactory | None = None,
+    speed_scale: float = 1.0,
     smooth_transition: bool = True,
     reference: Trajectory | str | os.PathLike[str] | None = None,
     # Any: passed on to racing_lib.planning.plan, whose keywords have different types.
@@ -378,6 +388,9 @@ def race(
         The car to drive instead of the simulated one (``LapSpec.car``; for a car identified
         and raced in one call see :func:`racing_lib.experiments.own_car.race_car`). Plan it with
         its own identified ``model``.
+    speed_scale : float
+        Drive the plan at this share of its speeds, in (0, 1] (1: the plan as it is), for a car
+        the controller cannot yet hold at the plan's speeds.
     smooth_transition : bool
         MPC: linearize along the blend from the measured state to the plan (the paper's choice).
     reference : Trajectory or path, optional
@@ -418,6 +431,7 @@ def race(
     """
     say = report or (lambda _line: None)
     kind = _check_choices(controller, weights, model, reference, trials, seed)
+    speed_scale = check_speed_scale(speed_scale)
     trk = load_track(track)  # a Track is returned as it is; None or a number is refused
 
     planned: PlanResult | None = None
@@ -446,6 +460,10 @@ def race(
             f"{kind.name} controller: reference at {kind.speed_scale:.0%} of the planned speed "
             f"({reference_tracked.lap_time:.2f} s)"
         )
+    if speed_scale != 1.0:
+        reference_tracked = reference_tracked.scale_speed(speed_scale)
+        lap = reference_tracked.lap_time
+        say(f"driving at {speed_scale:.0%} of the reference's speeds ({lap:.2f} s)")
     lap_weights, source, config = _resolve_weights(
         weights, kind, plan_method, model, smooth_transition
     )
@@ -478,4 +496,11 @@ def race(
     )
 
 
-__all__ = ["WEIGHT_CHOICES", "LapSummary", "ModelMismatchWarning", "RaceResult", "race"]
+__all__ = [
+    "WEIGHT_CHOICES",
+    "LapSummary",
+    "ModelMismatchWarning",
+    "RaceResult",
+    "check_speed_scale",
+    "race",
+]
