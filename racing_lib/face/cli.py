@@ -19,6 +19,8 @@ from typing import Any
 import numpy as np
 
 from racing_lib.errors import PlantError, RacingLibError
+from racing_lib.face.console import _clean, _emit_json, _say
+from racing_lib.face.learn_command import add_learn_parser
 from racing_lib.face.output_places import (
     check_output_dir,
     check_output_file,
@@ -34,26 +36,6 @@ from racing_lib.plants import CARS
 # `racing-lib --help` and the refusal of bad arguments stay instant.
 
 DEFAULT_TRACK = "expressway"
-
-
-def _say(*parts: object) -> None:
-    """Human-readable output: always standard error, so that stdout stays pure JSON."""
-    print(*parts, file=sys.stderr)
-
-
-def _clean(obj: Any) -> Any:
-    """Make an object JSON-safe: NaN and infinities become null."""
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return None
-    if isinstance(obj, dict):
-        return {k: _clean(v) for k, v in obj.items()}
-    if isinstance(obj, list | tuple):
-        return [_clean(v) for v in obj]
-    return obj
-
-
-def _emit_json(obj: dict[str, Any]) -> None:
-    print(json.dumps(_clean(obj), allow_nan=False))
 
 
 # --------------------------------------------------------------------------------------------------
@@ -465,6 +447,8 @@ def check_arguments(args: argparse.Namespace) -> None:
     _at_least(getattr(args, "budget", None), 1, "--budget", " (CMA-ES generations)")
     _at_least(getattr(args, "workers", None), 1, "--workers", " (1 runs the laps in-process)")
     _at_least(getattr(args, "max_iter", None), 1, "--max-iter")
+    _at_least(getattr(args, "iterations", None), 0, "--iterations")
+    _at_least(getattr(args, "seeds", None), 1, "--seeds", " (laps per iteration)")
     spacing = getattr(args, "spacing", None)
     if spacing is not None and not (math.isfinite(spacing) and 0.5 <= spacing <= 20.0):
         raise RacingLibError(
@@ -620,6 +604,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0, help="seed of CMA-ES and of the laps")
     p.add_argument("--out", default="tuned_weights.json", help="where to write the weights")
     p.set_defaults(func=cmd_tune)
+
+    add_learn_parser(sub, _add_track)
 
     p = sub.add_parser(
         "ablation", help="the paper's Table I and II: the shipped table, or rows recomputed"

@@ -11,6 +11,8 @@
 * :mod:`racing_lib.model.identified`: the shipped identified parameters (chapter 02's fit) and the
   default model of every run, :func:`identified_model`.
 * :mod:`racing_lib.model.actuator`: the steering lag the model leaves out.
+* :mod:`racing_lib.model.correction`: :class:`ModelCorrection`, residual accelerations learned
+  from laps (sparse GPs of :mod:`racing_lib.model.gp`), a parameter the equations add (chapter 09).
 * :mod:`racing_lib.model.drive`: :class:`Drive`, the record of a drive (a lap, a manoeuvre).
 * :mod:`racing_lib.model.lateral`: the linear analysis of the lateral dynamics.
 * :mod:`racing_lib.model.prediction`: the open-loop prediction error against a recorded drive.
@@ -20,6 +22,7 @@ Taught in notebook 02.
 """
 
 from racing_lib.model.car_model import DEFAULT_V_TOP, CarModel, ModelMismatchWarning
+from racing_lib.model.correction import ModelCorrection
 from racing_lib.model.drive import Drive
 from racing_lib.model.equations import (
     VX_GUARD,
@@ -52,6 +55,7 @@ __all__ = [
     "NX",
     "VX_GUARD",
     "Model",
+    "ModelCorrection",
     "ModelMismatchWarning",
     "ModelOptions",
     "ModelParams",

@@ -160,7 +160,7 @@ class CarModel:
             if getattr(a, name) != getattr(b, name)
         ]
         mine, theirs = self.params.to_dict(), other.params.to_dict()
-        changed = sorted(k for k in mine if mine[k] != theirs[k])
+        changed = sorted(k for k in mine.keys() | theirs.keys() if mine.get(k) != theirs.get(k))
         if changed:
             out.append(f"parameters {', '.join(changed)}")
         return out

@@ -215,6 +215,18 @@ def _equations(
         delta_W_F = ca.SX(0)
         delta_W_R = ca.SX(0)
 
+    if p.correction is not None:
+        # The learned residual accelerations (racing_lib.model.correction), added last: they
+        # stand for what the terms above leave out, load transfer included
+        dv_x, dv_y, dr = p.correction.casadi(ca.vertcat(v_x, alpha_f, alpha_r, a_x))
+        v_x_dot, v_y_dot, r_dot = v_x_dot + dv_x, v_y_dot + dv_y, r_dot + dr
+        # The lateral acceleration the grip limits bound is the car's, correction included:
+        # otherwise a planner finds grip in the correction that no limit accounts for
+        a_y = a_y + dv_y
+        a_x_std, a_y_std, _ = p.correction.casadi_std(ca.vertcat(v_x, alpha_f, alpha_r, a_x))
+    else:
+        a_x_std = a_y_std = ca.SX(0)
+
     xi_dot = ca.vertcat(v_x_dot, v_y_dot, r_dot, e_psi_dot, e_y_dot, s_dot)
     terms = {
         "s_dot": s_dot,
@@ -230,6 +242,8 @@ def _equations(
         "delta_W_F": delta_W_F,
         "delta_W_R": delta_W_R,
         "a_y": a_y,
+        "a_x_std": a_x_std,
+        "a_y_std": a_y_std,
     }
     return xi_dot, terms
 
@@ -320,7 +334,9 @@ def model_terms(
     """Intermediate quantities (named outputs) for plots, constraints and checks.
 
     ``(xi, u, kappa, theta) -> s_dot (m/s), alpha_f, alpha_r (rad), F_zf, F_zr, F_yf, F_yr, F_xw,
-    R_x, delta_W, delta_W_F, delta_W_R (N), a_y (m/s^2)``. Use ``fn(xi=..., u=..., ...)["F_zf"]``.
+    R_x, delta_W, delta_W_F, delta_W_R (N), a_y (m/s^2), a_x_std, a_y_std`` (m/s^2: the
+    posterior standard deviations of a learned correction of ``v_x_dot`` and ``v_y_dot``, zero
+    without one). Use ``fn(xi=..., u=..., ...)["F_zf"]``.
     """
     check_args(params, options)
     xi, u, kappa, theta = _symbols()

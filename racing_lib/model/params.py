@@ -24,6 +24,7 @@ from numpy.typing import ArrayLike
 
 from racing_lib.errors import ModelError
 from racing_lib.io import JSONObject, atomic_write_json
+from racing_lib.model.correction import ModelCorrection
 from racing_lib.model.states import NX, X, as_float, state_rows
 
 # The force laws are defined once, in racing_lib/vehicle/forces.py, for floats, numpy and CasADi
@@ -450,6 +451,9 @@ class ModelParams:
         Gravitational acceleration, m/s^2.
     pedal : PedalMap
         Map between pedal and tyre acceleration (Appendix C), also giving the ``a_x`` limits.
+    correction : ModelCorrection or None
+        Learned additions to the accelerations ``(v_x_dot, v_y_dot, r_dot)``, fitted on logged
+        laps (:mod:`racing_lib.model.correction`, chapter 09); None: the equations as written.
     """
 
     # Defaults: the simulated car's true values, defined once in VehicleParams
@@ -470,6 +474,7 @@ class ModelParams:
     D_r: float = VehicleParams.D_r
     g: float = VehicleParams.g
     pedal: PedalMap = field(default_factory=PedalMap)
+    correction: ModelCorrection | None = None
 
     def __post_init__(self) -> None:
         for name in _POSITIVE:
@@ -487,6 +492,11 @@ class ModelParams:
             object.__setattr__(self, name, value)
         if not isinstance(self.pedal, PedalMap):
             raise ModelError(f"ModelParams.pedal must be a PedalMap; got {type(self.pedal)}.")
+        if self.correction is not None and not isinstance(self.correction, ModelCorrection):
+            raise ModelError(
+                "ModelParams.correction must be a racing_lib.model.ModelCorrection (learned by "
+                f"racing_lib.experiments.learning) or None; got {type(self.correction)}."
+            )
         for axle in ("f", "r"):
             C = getattr(self, f"C_{axle}")
             if C >= 2.0:
@@ -550,7 +560,7 @@ class ModelParams:
         """
         return self.mu * min(self.D_f, self.D_r) * self.g
 
-    def replace(self, **changes: float | PedalMap) -> ModelParams:
+    def replace(self, **changes: float | PedalMap | ModelCorrection | None) -> ModelParams:
         """A copy with some fields changed (validated)."""
         return dataclasses.replace(self, **changes)
 
@@ -562,7 +572,7 @@ class ModelParams:
         The pedal map is not a parameter of the car (its powertrain is nonlinear): pass an
         identified one, or get the placeholder default.
         """
-        names = {f.name for f in dataclasses.fields(cls)} - {"pedal"}
+        names = {f.name for f in dataclasses.fields(cls)} - {"pedal", "correction"}
         values: dict[str, float] = {}
         missing = []
         for name in sorted(names):
@@ -578,11 +588,14 @@ class ModelParams:
         return cls(**values, pedal=pedal if pedal is not None else PedalMap())
 
     def to_dict(self) -> JSONObject:
-        """JSON-ready dictionary (the pedal map nested under ``"pedal"``)."""
+        """JSON-ready dictionary (nested: ``"pedal"``, and ``"correction"`` when there is one)."""
+        nested = ("pedal", "correction")
         out: JSONObject = {
-            f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name != "pedal"
+            f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name not in nested
         }
         out["pedal"] = self.pedal.to_dict()
+        if self.correction is not None:
+            out["correction"] = self.correction.to_dict()
         return out
 
     @classmethod
@@ -592,6 +605,10 @@ class ModelParams:
         kwargs = dict(data)
         if "pedal" in kwargs and not isinstance(kwargs["pedal"], PedalMap):
             kwargs["pedal"] = PedalMap.from_dict(kwargs["pedal"])
+        if kwargs.get("correction") is not None and not isinstance(
+            kwargs["correction"], ModelCorrection
+        ):
+            kwargs["correction"] = ModelCorrection.from_dict(kwargs["correction"])
         return cls(**kwargs)
 
     def save(self, path: str | os.PathLike[str]) -> None:

@@ -135,7 +135,17 @@ def _path_constraints(
         # along the car (Eq. 5): with a_x alone in the ellipse the optimum braked beyond it by
         # scrubbing, a steering zig-zag in the braking zones that the car cannot follow.
         a_long = z[_ROWS["AX"]] - terms["F_yf"] * ca.sin(u[int(U.DELTA)]) / params.m
-        path.append((a_long / grip_x) ** 2 + (terms["a_y"] / grip) ** 2)
+        ellipse = (a_long / grip_x) ** 2 + (terms["a_y"] / grip) ** 2
+        if params.correction is not None and st.uncertainty_margin > 0.0:
+            # (a_long / grip_x)^2 + (a_y / grip)^2 <= (1 - share)^2 with share the learned
+            # accelerations' standard deviations on the ellipse's own scale, written with the
+            # same bound: the ellipse shrinks where the correction is unsure. Both axes count:
+            # the first plan that used only a_y's braked from the top speed where no lap had
+            # braked, on a longitudinal correction nobody had checked, and spun the car.
+            spread = ca.sqrt((terms["a_x_std"] / grip_x) ** 2 + (terms["a_y_std"] / grip) ** 2)
+            share = st.uncertainty_margin * spread
+            ellipse = ellipse + 2.0 * share - share**2
+        path.append(ellipse)
         lb.append(-np.inf)
         ub.append(1.0)
     if st.drive_axle_circle:

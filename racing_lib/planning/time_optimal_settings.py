@@ -81,6 +81,13 @@ class TimeOptimalSettings:
         Keep the drive force and the rear lateral force inside the rear tyres' friction circle
         (the car is rear-wheel driven): without it the plan accelerates out of corners harder
         than the car's traction control allows.
+    uncertainty_margin : float
+        With a learned model correction (:class:`racing_lib.model.ModelCorrection`): how many
+        posterior standard deviations of the learned accelerations (longitudinal and lateral,
+        each on its axis of the ellipse) the plan keeps inside the friction ellipse, node by
+        node. Where the laps it learned from went, the correction
+        is sure and the plan may go close to the limit; where they did not, it keeps away. No
+        effect on a model without a correction.
     pedal_limits : {"iterate", "exact"}
         How the state-dependent a_x limits are imposed (see the module docstring).
     max_outer : int
@@ -130,6 +137,7 @@ class TimeOptimalSettings:
     slip_force_share: float = 0.95
     friction_ellipse: bool = True
     drive_axle_circle: bool = True
+    uncertainty_margin: float = 2.0
     pedal_limits: str = "exact"
     max_outer: int = 4
     outer_tol: float = 0.05

@@ -1,0 +1,118 @@
+"""Learning from laps, measured (``python benchmarks/bench_learning.py``).
+
+Runs ``racing_lib.experiments.learning.learn`` on a track (default: the expressway, the simulated
+car): iteration 0 drives the model as identified with its blanket margins, each later iteration
+fits a GP correction of the model on every clean lap so far, re-plans with it (its uncertainty as
+the margin) and drives again. Then the model of the fastest clean iteration drives ``--final``
+laps on seeds no iteration used, the measure of the result.
+
+Prints one row per iteration: planned and driven lap (mean over its seeds), the gap to the best
+possible lap (where known: the shipped table's NLP on the car's own equations), walls, time off
+track, the one-period prediction error of v_x, v_y (m/s^2) and r (rad/s^2) on the iteration's
+own laps, which no fit had seen (identified -> learned), the residual samples fitted on, and the
+wall time of fitting, planning and driving. Then the final laps: mean, spread, walls, time off
+track and the gap.
+
+The run is kept in ``--out`` (default runs/learning_TRACK) and resumes where it stopped; delete
+the folder to start again.
+
+Example: python benchmarks/bench_learning.py --iterations 5 --seeds 4 --final 10
+"""
+
+from __future__ import annotations
+
+import statistics
+import time
+
+from _script import argument_parser, run
+
+from racing_lib.experiments.learning import LearnSettings, learn
+from racing_lib.experiments.pipeline import race
+from racing_lib.model import CarModel
+from racing_lib.planning import TimeOptimalSettings
+from racing_lib.tracks import load_track
+
+
+def _errors(it) -> str:
+    before = it.prediction_error.get("identified") or {}
+    after = it.prediction_error.get("learned") or {}
+    parts = []
+    for key in ("v_x", "v_y", "r"):
+        if key not in before:
+            parts.append("   -")
+        elif key in after:
+            parts.append(f"{before[key]:.2f}>{after[key]:.2f}")
+        else:
+            parts.append(f"{before[key]:.2f}     ")
+    return " ".join(parts)
+
+
+def main() -> int:
+    parser = argument_parser(__doc__)
+    parser.add_argument("--track", default="expressway", help="track (default expressway)")
+    parser.add_argument("--iterations", type=int, default=5, help="learning iterations (5)")
+    parser.add_argument("--seeds", type=int, default=4, help="laps per iteration (4)")
+    parser.add_argument("--final", type=int, default=10, help="laps of the final check (10)")
+    parser.add_argument("--out", help="folder of the run (default runs/learning_TRACK)")
+    args = parser.parse_args()
+    track = load_track(args.track)
+    out = args.out or f"runs/learning_{track.name}"
+    settings = LearnSettings(iterations=args.iterations, seeds=args.seeds)
+    print(f"learning on {track.name}: {args.iterations} iterations x {args.seeds} laps, "
+          f"kept in {out}/", flush=True)  # fmt: skip
+    result = learn(track, settings, out=out, report=lambda line: print("  " + line, flush=True))
+    best_lap = result.best_possible_lap_s
+    print()
+    print(f"{'it':>2} {'plan s':>8} {'driven s':>9} {'gap %':>6} {'walls':>5} {'off s':>5} "
+          f"{'pred. error v_x v_y r (identified>learned)':<43} {'samples':>7} "
+          f"{'fit s':>5} {'plan s':>6} {'laps s':>6}")  # fmt: skip
+    for it in result.iterations:
+        driven = "-" if it.driven_lap_s is None else f"{it.driven_lap_s:.2f}"
+        gap = "-" if it.gap_to_best_pct is None else f"{it.gap_to_best_pct:+.2f}"
+        fit, plan_s, laps_s = (it.wall_time_s.get(k, 0.0) for k in ("fit", "plan", "laps"))
+        print(f"{it.iteration:>2} {it.planned_lap_s:>8.2f} {driven:>9} {gap:>6} {it.walls:>5} "
+              f"{it.offtrack_s:>5.1f} {_errors(it):<43} {it.samples:>7} "
+              f"{fit:>5.1f} {plan_s:>6.1f} {laps_s:>6.1f}")  # fmt: skip
+    best = result.best()
+    if best is None:
+        print("no clean iteration")
+        return 1
+    model = CarModel.from_dict(_model_of(out, best.iteration))
+    t0 = time.perf_counter()
+    final = race(
+        track,
+        model=model,
+        trials=args.final,
+        seed=10_000,
+        plan_kwargs={
+            "time_optimal_settings": TimeOptimalSettings(
+                uncertainty_margin=settings.uncertainty_margin * best.caution
+            )
+        },
+    )
+    laps = [lap.metrics for lap in final.laps]
+    done = [m.lap_time_s for m in laps if m.completed]
+    mean = statistics.fmean(done) if done else float("nan")
+    walls = sum(m.wall_contacts for m in laps)
+    off = sum(m.offtrack_time_s for m in laps)
+    gap = "" if best_lap is None else f", {100 * (mean / best_lap - 1):+.2f} % on the best lap"
+    print()
+    print(f"final: the model of iteration {best.iteration} on {args.final} new seeds: "
+          f"{len(done)}/{len(laps)} completed, {mean:.2f} +- {statistics.pstdev(done):.2f} s"
+          f"{gap}, {walls} wall contacts, {off:.1f} s off track "
+          f"({time.perf_counter() - t0:.0f} s)")  # fmt: skip
+    if best_lap is not None:
+        print(f"best possible lap {best_lap:.2f} s; the paper's gap to the human best: +1.41 %")
+    return 0
+
+
+def _model_of(out: str, iteration: int) -> dict:
+    import json
+    from pathlib import Path
+
+    path = Path(out) / f"iteration_{iteration:02d}" / "model.json"
+    return json.loads(path.read_text(encoding="utf-8"))
+
+
+if __name__ == "__main__":
+    run(main)

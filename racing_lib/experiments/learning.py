@@ -1,0 +1,470 @@
+"""Learning from laps: drive, fit a model correction, re-plan, drive again (chapter 09).
+
+The paper closes with learning-based modelling as the way to close the rest of the gap to the
+best lap, and its authors' follow-up (Su, Hao et al. 2023) fits Gaussian-process corrections to
+the planner's and the controller's model, iterating between driving and fitting. This module is
+that loop for any car racing_lib can drive:
+
+* **iteration 0** drives the model as identified, with its blanket margins (the main job);
+* **iteration i >= 1** fits a :class:`~racing_lib.model.ModelCorrection` on the clean laps of
+  every iteration before it (:func:`racing_lib.model.residuals.fit_correction`), plans with the
+  corrected model and drives the plan with the MPC predicting with that same model.
+
+What replaces the blanket margins in a learned iteration:
+
+* the **grip margin** (5 % of the friction everywhere) gives way to the correction's own
+  uncertainty: the friction ellipse of the plan shrinks by ``uncertainty_margin`` posterior
+  standard deviations of the learned lateral acceleration, node by node
+  (:attr:`racing_lib.planning.TimeOptimalSettings.uncertainty_margin`): close to the limit where
+  the laps went, away from it where they did not;
+* the **edge margin** (0.8 m to a wall) becomes ``edge_margin`` (0.4 m by default), or the
+  largest lateral tracking error of the iteration before plus :data:`EDGE_SAFETY`, whichever is
+  larger: the corrected model lets the MPC track its line to a few centimetres, and the margin
+  follows what was measured.
+
+A lap that touched a wall or left the track is not learned from (its log holds the wall's forces,
+not the car's). Every finished iteration is written to its own folder, so an interrupted run
+resumes where it stopped and loses no finished iteration.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+from zipfile import BadZipFile
+
+import numpy as np
+
+from racing_lib.errors import ArgumentError, ModelError
+from racing_lib.experiments.lap import LapLog, LapResult, PlantFactory
+from racing_lib.experiments.pipeline import race
+from racing_lib.geometry import Track
+from racing_lib.io import atomic_write_json
+from racing_lib.model import CarModel, ModelCorrection, identified_model
+from racing_lib.model.residuals import (
+    ResidualSamples,
+    fit_correction,
+    one_step_errors,
+    residual_samples,
+)
+from racing_lib.planning import TimeOptimalSettings
+from racing_lib.tracks import load_track
+
+__all__ = [
+    "EDGE_SAFETY",
+    "IterationResult",
+    "LearnSettings",
+    "LearningRun",
+    "known_best_lap",
+    "learn",
+]
+
+#: Added to the largest lateral tracking error measured in an iteration to give the next
+#: iteration's edge margin, m.
+EDGE_SAFETY = 0.15
+
+
+@dataclass(frozen=True)
+class LearnSettings:
+    """How the learning loop drives and fits.
+
+    Attributes
+    ----------
+    iterations : int
+        Learning iterations after iteration 0 (the model as identified).
+    seeds : int
+        Laps per iteration (seeded, their mean is the iteration's lap time).
+    seed : int
+        Seed of the first lap; iteration ``i`` drives seeds ``seed + 1000 i + k``.
+    uncertainty_margin : float
+        Posterior standard deviations of the learned lateral acceleration that the plan keeps
+        inside the friction ellipse.
+    edge_margin : float
+        Smallest distance between the car's side and the track edge in a learned iteration, m.
+    inducing : int
+        Inducing inputs of each GP of the correction.
+    min_length : float
+        Shortest GP length scale, in standard deviations of each feature.
+    """
+
+    iterations: int = 5
+    seeds: int = 4
+    seed: int = 0
+    uncertainty_margin: float = 2.0
+    edge_margin: float = 0.4
+    inducing: int = 40
+    min_length: float = 1.0
+
+    def __post_init__(self) -> None:
+        checks = (
+            ("iterations", self.iterations, 0, "an integer >= 0"),
+            ("seeds", self.seeds, 1, "an integer >= 1"),
+            ("inducing", self.inducing, 5, "an integer >= 5"),
+        )
+        for name, value, low, rule in checks:
+            if isinstance(value, bool) or not isinstance(value, int) or value < low:
+                raise ArgumentError(f"LearnSettings.{name} must be {rule}, got {value!r}.")
+        for name in ("uncertainty_margin", "edge_margin", "min_length"):
+            value = getattr(self, name)
+            if not (isinstance(value, int | float) and math.isfinite(value) and value >= 0):
+                raise ArgumentError(f"LearnSettings.{name} must be a number >= 0, got {value!r}.")
+
+
+@dataclass
+class IterationResult:
+    """One iteration of the loop, as written to its folder and printed by ``racing-lib learn``.
+
+    Attributes
+    ----------
+    iteration : int
+        0 for the model as identified, then 1, 2, ...
+    planned_lap_s : float
+        The plan's lap time, s.
+    driven_lap_s : float or None
+        Mean closed-loop lap time over the iteration's completed laps, s.
+    driven_lap_std_s : float or None
+        Their standard deviation, s.
+    gap_to_best_pct : float or None
+        ``driven_lap_s`` over the best possible lap, minus one, % (None when unknown).
+    walls : int
+        Wall contacts over all the iteration's laps.
+    offtrack_s : float
+        Time off the track over all its laps, s.
+    completed : int
+        Laps completed (of ``laps``).
+    laps : int
+        Laps driven.
+    ey_max_m : float
+        Largest lateral distance to the plan's line over the laps, m.
+    prediction_error : dict
+        One-period RMS prediction error of ``v_x``, ``v_y`` (m/s^2) and ``r`` (rad/s^2) on this
+        iteration's laps, which no correction has seen: ``{"identified": {...}, "learned":
+        {...}}`` (``learned`` is None in iteration 0).
+    grip_margin : float
+        The share of friction the plan left unused.
+    edge_margin : float or None
+        The distance the plan kept from the track edge, m (None: the planner's default).
+    caution : float
+        Factor on the settings' uncertainty margin: 1, doubled after each iteration that was
+        not clean.
+    samples : int
+        Residual samples the correction was fitted on (0 in iteration 0).
+    wall_time_s : dict
+        Seconds spent fitting, planning and driving.
+    """
+
+    iteration: int
+    planned_lap_s: float
+    driven_lap_s: float | None
+    driven_lap_std_s: float | None
+    gap_to_best_pct: float | None
+    walls: int
+    offtrack_s: float
+    completed: int
+    laps: int
+    ey_max_m: float
+    prediction_error: dict[str, dict[str, float] | None]
+    grip_margin: float
+    edge_margin: float | None
+    caution: float
+    samples: int
+    wall_time_s: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def clean(self) -> bool:
+        """Every lap completed, without wall contact or time off the track."""
+        return self.completed == self.laps and self.walls == 0 and self.offtrack_s == 0.0
+
+
+@dataclass
+class LearningRun:
+    """What :func:`learn` returns: the iterations and where they are kept.
+
+    Attributes
+    ----------
+    track : str
+        Name of the track.
+    best_possible_lap_s : float or None
+        The best possible lap of the simulated car on this track, where racing_lib knows it.
+    iterations : list of IterationResult
+    out : Path or None
+        The folder of the run.
+    """
+
+    track: str
+    best_possible_lap_s: float | None
+    iterations: list[IterationResult]
+    out: Path | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON object of ``racing-lib learn --json``."""
+        return {
+            "track": self.track,
+            "best_possible_lap_s": self.best_possible_lap_s,
+            "iterations": [asdict(it) for it in self.iterations],
+        }
+
+    def best(self) -> IterationResult | None:
+        """The fastest clean iteration."""
+        clean = [it for it in self.iterations if it.clean and it.driven_lap_s is not None]
+        return min(clean, key=lambda it: it.driven_lap_s or math.inf) if clean else None
+
+
+def known_best_lap(track: Track) -> float | None:
+    """The best possible lap of the simulated car on ``track``, s, where it is known.
+
+    From the shipped ablation table's ``best-lap`` row (an NLP on the car's own equations,
+    :mod:`racing_lib.planning.best_lap`), when the track is the one it was planned on.
+    """
+    from racing_lib.experiments.ablation.table import shipped_table
+
+    for row in shipped_table():
+        if row.get("name") == "best-lap" and row.get("track_checksum") == track.checksum():
+            return float(row["planned_lap_time_s"])
+    return None
+
+
+def _iteration_dir(out: Path, i: int) -> Path:
+    return out / f"iteration_{i:02d}"
+
+
+def _load_done(out: Path, i: int) -> tuple[IterationResult, list[LapLog]] | None:
+    """A finished iteration from its folder, or None when it did not finish."""
+    folder = _iteration_dir(out, i)
+    summary = folder / "summary.json"
+    if not summary.is_file():
+        return None
+    try:
+        data = json.loads(summary.read_text(encoding="utf-8"))
+        result = IterationResult(**data["result"])
+        logs = [LapLog.load(folder / name) for name in data["clean_logs"]]
+    except (OSError, ValueError, TypeError, KeyError, EOFError, BadZipFile, ModelError) as exc:
+        raise ArgumentError(
+            f"{summary} is damaged ({exc}); delete the folder {folder} to drive that iteration "
+            "again."
+        ) from None
+    return result, logs
+
+
+def _clean(lap: LapResult) -> bool:
+    """A lap to learn from: completed, no wall contact, never off the track."""
+    m = lap.metrics
+    return m.completed and m.wall_contacts == 0 and m.offtrack_time_s == 0.0
+
+
+def _save_done(
+    out: Path, result: IterationResult, laps: Sequence[LapResult], model: CarModel
+) -> None:
+    """Write an iteration's laps, model and summary (the summary last: it marks it done)."""
+    folder = _iteration_dir(out, result.iteration)
+    folder.mkdir(parents=True, exist_ok=True)
+    clean_names = []
+    for k, lap in enumerate(laps):
+        name = f"lap_{k:02d}.npz"
+        lap.log.save(folder / name)
+        if _clean(lap):
+            clean_names.append(name)
+    atomic_write_json(folder / "model.json", model.to_dict())
+    atomic_write_json(
+        folder / "summary.json", {"result": asdict(result), "clean_logs": clean_names}
+    )
+
+
+def _caution(previous: IterationResult | None) -> float:
+    """Factor on the uncertainty margin: doubled after an iteration that was not clean.
+
+    An iteration whose laps touched a wall taught nothing (its laps are not learned from), so
+    the next one would fit the same correction and make the same plan: it must keep farther
+    from what the correction is unsure of instead. A clean iteration keeps its caution.
+    """
+    if previous is None or previous.iteration == 0:
+        return 1.0
+    return previous.caution * (1.0 if previous.clean else 2.0)
+
+
+def _iteration_model(
+    base: CarModel,
+    correction: ModelCorrection | None,
+    settings: LearnSettings,
+    previous: IterationResult | None,
+) -> CarModel:
+    """The model iteration i plans and predicts with."""
+    if correction is None:
+        return base
+    edge = settings.edge_margin
+    if previous is not None and previous.iteration > 0 and previous.clean:
+        edge = max(edge, previous.ey_max_m + EDGE_SAFETY)
+    return base.replace(
+        params=base.params.replace(correction=correction), grip_margin=0.0, edge_margin=edge
+    )
+
+
+def learn(
+    track: str | os.PathLike[str] | Track = "expressway",
+    settings: LearnSettings = LearnSettings(),
+    *,
+    model: CarModel | None = None,
+    car: PlantFactory | None = None,
+    out: str | os.PathLike[str] | None = None,
+    progress: bool = False,
+    report: Callable[[str], None] | None = None,
+) -> LearningRun:
+    """Drive, fit a model correction, re-plan and drive again, ``settings.iterations`` times.
+
+    Parameters
+    ----------
+    track : str, path or Track
+        The track (a built-in name, a track CSV or a Track).
+    settings : LearnSettings
+        Iterations, laps per iteration, seeds and margins.
+    model : CarModel, optional
+        The model as identified (default :func:`racing_lib.model.identified_model`); a
+        correction it carries is replaced by the learned one.
+    car : callable ``(track, start_speed) -> Plant``, optional
+        Another car than the simulated one (:attr:`racing_lib.experiments.lap.LapSpec.car`).
+    out : path, optional
+        Folder that keeps every iteration (laps, model, summary); a run started again with the
+        same folder resumes after its last finished iteration. None: nothing is kept.
+    progress : bool
+        Show a progress bar over the iterations.
+    report : callable, optional
+        Called with one line of text per iteration.
+
+    Returns
+    -------
+    LearningRun
+    """
+    if not isinstance(settings, LearnSettings):
+        raise ArgumentError(f"settings must be a LearnSettings, got {type(settings).__name__}.")
+    track_obj = track if isinstance(track, Track) else load_track(track)
+    base = identified_model() if model is None else model
+    if base.params.correction is not None:
+        base = base.replace(params=base.params.replace(correction=None))
+    out_dir = None if out is None else Path(out)
+    if out_dir is not None:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    best = known_best_lap(track_obj) if car is None else None
+    say = report or (lambda line: None)
+    run = LearningRun(track_obj.name, best, [], out_dir)
+    logs: list[LapLog] = []
+    samples: list[ResidualSamples] = []
+
+    bar = None
+    if progress:
+        from tqdm.auto import tqdm
+
+        bar = tqdm(total=settings.iterations + 1, desc="learning", unit="iteration")
+    for i in range(settings.iterations + 1):
+        done = None if out_dir is None else _load_done(out_dir, i)
+        if done is not None:
+            result, new_logs = done
+            say(f"iteration {i}: kept from {_iteration_dir(out_dir, i)}")
+        else:
+            previous = run.iterations[-1] if run.iterations else None
+            result, new_logs = _run_iteration(
+                i, track_obj, base, car, settings, samples, previous, out_dir, best
+            )
+            say(_line(result))
+        run.iterations.append(result)
+        logs += new_logs
+        samples += [residual_samples(log, track_obj, base) for log in new_logs]
+        if bar is not None:
+            bar.update(1)
+    if bar is not None:
+        bar.close()
+    return run
+
+
+def _run_iteration(
+    i: int,
+    track: Track,
+    base: CarModel,
+    car: PlantFactory | None,
+    settings: LearnSettings,
+    samples: Sequence[ResidualSamples],
+    previous: IterationResult | None,
+    out: Path | None,
+    best: float | None,
+) -> tuple[IterationResult, list[LapLog]]:
+    """Fit (from iteration 1 on), plan and drive one iteration."""
+    t0 = time.perf_counter()
+    correction = None
+    n_samples = 0
+    if i > 0:
+        if not samples:
+            raise ModelError(
+                "no clean lap to learn from: every lap so far touched a wall or left the track. "
+                "Drive the identified model with larger margins first."
+            )
+        joined = ResidualSamples.concatenate(samples)
+        n_samples = len(joined)
+        correction = fit_correction(
+            joined,
+            inducing=settings.inducing,
+            min_length=settings.min_length,
+            seed=settings.seed,
+            label=f"learned from {n_samples} samples, iteration {i}",
+        )
+    model = _iteration_model(base, correction, settings, previous)
+    caution = _caution(previous)
+    t1 = time.perf_counter()
+    plan_settings = TimeOptimalSettings(uncertainty_margin=settings.uncertainty_margin * caution)
+    laps: list[LapResult] = []
+    result = race(
+        track,
+        model=model,
+        car=car,
+        trials=settings.seeds,
+        seed=settings.seed + 1000 * i,
+        plan_kwargs={"time_optimal_settings": plan_settings},
+        on_lap=laps.append,
+    )
+    t2 = time.perf_counter()
+    plan_s = float(result.plan.solve_time) if result.plan is not None else 0.0
+    metrics = [lap.metrics for lap in result.laps]
+    done = [m.lap_time_s for m in metrics if m.completed]
+    mean = float(np.mean(done)) if done else None
+    held_out = [lap.log for lap in result.laps if lap.metrics.completed]
+    errors: dict[str, dict[str, float] | None] = {"identified": None, "learned": None}
+    if held_out:
+        errors["identified"] = one_step_errors(held_out, track, base)
+        if correction is not None:
+            errors["learned"] = one_step_errors(held_out, track, model)
+    iteration = IterationResult(
+        iteration=i,
+        planned_lap_s=float(result.planned_lap_time),
+        driven_lap_s=mean,
+        driven_lap_std_s=float(np.std(done)) if done else None,
+        gap_to_best_pct=None if (mean is None or best is None) else 100.0 * (mean / best - 1.0),
+        walls=int(sum(m.wall_contacts for m in metrics)),
+        offtrack_s=float(sum(m.offtrack_time_s for m in metrics)),
+        completed=len(done),
+        laps=len(metrics),
+        ey_max_m=float(max(m.ey_max_m for m in metrics)),
+        prediction_error=errors,
+        grip_margin=model.grip_margin,
+        edge_margin=model.edge_margin,
+        caution=caution,
+        samples=n_samples,
+        wall_time_s={"fit": t1 - t0, "plan": plan_s, "laps": t2 - t1 - plan_s},
+    )
+    if out is not None:
+        _save_done(out, iteration, laps, model)
+    return iteration, [lap.log for lap in laps if _clean(lap)]
+
+
+def _line(it: IterationResult) -> str:
+    """One line for people about an iteration."""
+    driven = "not completed" if it.driven_lap_s is None else f"{it.driven_lap_s:.2f} s"
+    gap = "" if it.gap_to_best_pct is None else f" ({it.gap_to_best_pct:+.2f} % on the best lap)"
+    return (
+        f"iteration {it.iteration}: plan {it.planned_lap_s:.2f} s, driven {driven}{gap}, "
+        f"{it.walls} wall contacts, {it.offtrack_s:.1f} s off track, "
+        f"{sum(it.wall_time_s.values()):.0f} s"
+    )

@@ -1,0 +1,155 @@
+"""A learned correction of the model's accelerations, fitted on logged laps (chapter 09).
+
+The identified model (chapter 02) has the structure of the paper's bicycle; the car it stands
+for has more (load-sensitive tyres, combined slip, a powertrain with gears). What the structure
+cannot express shows up as *residual accelerations*: the measured change of ``v_x``, ``v_y`` and
+``r`` over one control period, less the model's prediction, divided by the period. A
+:class:`ModelCorrection` holds one sparse Gaussian process (:mod:`racing_lib.model.gp`) per
+residual, each a function of the body-frame state and the inputs::
+
+    features  z = (v_x, alpha_f, alpha_r, a_x)     (m/s, rad, rad, m/s^2)
+    correction    (dv_x, dv_y, dr)(z)              (m/s^2, m/s^2, rad/s^2)
+
+and the model's equations add the posterior mean to ``(v_x_dot, v_y_dot, r_dot)``
+(:func:`racing_lib.model.equations.time_dynamics`). The correction is a field of
+:class:`~racing_lib.model.params.ModelParams`, so it travels with the plan and its file to the
+MPC like every other parameter: the planner and the controller see the same corrected model.
+Away from the data the mean returns to zero (the model as identified) and the posterior standard
+deviation grows: :meth:`ModelCorrection.std` says where the learned model is unsure.
+
+The features say what the tyres and the powertrain are asked for: the slip angles (which the
+tyre forces depend on), the speed and the tyre acceleration (load transfer, combined slip,
+gears). They are frame-free, so the correction does not depend on where on which track the car
+is, and they are far less correlated along a lap than ``v_y``, ``r`` and ``delta``, whose
+combinations off the recorded laps made a GP over them extrapolate wildly inside the MPC.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+
+from racing_lib.errors import ModelError
+from racing_lib.model.gp import SparseGP
+from racing_lib.model.states import X
+
+__all__ = ["CORRECTED", "FEATURES", "ModelCorrection"]
+
+#: The inputs of the correction, in order: the speed, the two slip angles and the tyre
+#: acceleration (m/s, rad, rad, m/s^2), as the model computes them (``model_terms``).
+FEATURES: tuple[str, ...] = ("v_x", "alpha_f", "alpha_r", "a_x")
+#: The state derivatives the correction adds to, in order (indices of :class:`X`).
+CORRECTED: tuple[int, ...] = (int(X.VX), int(X.VY), int(X.R))
+
+
+class ModelCorrection:
+    """Additive corrections of ``(v_x_dot, v_y_dot, r_dot)``, one sparse GP each (or none).
+
+    Immutable and hashable by its content (:attr:`digest`), so that the model's cached CasADi
+    functions are built once per correction and two equal corrections share them.
+
+    Parameters
+    ----------
+    gps : sequence of three SparseGP or None
+        The GP of each corrected derivative, in the order of :data:`CORRECTED`; None leaves that
+        derivative as the model has it.
+    label : str
+        A name for people (e.g. ``"learned from 3 laps, iteration 2"``).
+    """
+
+    __slots__ = ("_digest", "gps", "label")
+
+    def __init__(self, gps: Sequence[SparseGP | None], label: str = "") -> None:
+        gps = tuple(gps)
+        if len(gps) != len(CORRECTED):
+            raise ModelError(
+                f"a ModelCorrection has {len(CORRECTED)} entries (v_x, v_y, r), got {len(gps)}."
+            )
+        for gp in gps:
+            if gp is not None and not isinstance(gp, SparseGP):
+                raise ModelError(f"a ModelCorrection holds SparseGP or None, got {type(gp)}.")
+            if gp is not None and gp.z.shape[1] != len(FEATURES):
+                raise ModelError(
+                    f"a correction's GP takes the {len(FEATURES)} features {FEATURES}, this one "
+                    f"takes {gp.z.shape[1]}."
+                )
+        object.__setattr__(self, "gps", gps)
+        object.__setattr__(self, "label", str(label))
+        text = json.dumps(self._arrays(), sort_keys=True)
+        object.__setattr__(self, "_digest", hashlib.sha256(text.encode()).hexdigest()[:16])
+
+    def __setattr__(self, name: str, value: object) -> None:
+        raise AttributeError("a ModelCorrection is immutable")
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, ModelCorrection) and other._digest == self._digest
+
+    def __hash__(self) -> int:
+        return hash(self._digest)
+
+    def __repr__(self) -> str:
+        return f"ModelCorrection({self.label or 'learned'}, {self._digest})"
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        return (ModelCorrection.from_dict, (self.to_dict(),))
+
+    @property
+    def digest(self) -> str:
+        """A 16-hex-digit fingerprint of the GPs' arrays (the label is not part of it)."""
+        return self._digest
+
+    # --- evaluation -------------------------------------------------------------------------------
+    def mean(self, z: np.ndarray) -> np.ndarray:
+        """The correction at features ``z`` (N, 5): shape (N, 3), in m/s^2, m/s^2, rad/s^2."""
+        z = np.atleast_2d(np.asarray(z, dtype=float))
+        return np.column_stack(
+            [np.zeros(z.shape[0]) if gp is None else gp.mean(z) for gp in self.gps]
+        )
+
+    def std(self, z: np.ndarray) -> np.ndarray:
+        """Posterior standard deviation of the correction at features ``z``: shape (N, 3)."""
+        z = np.atleast_2d(np.asarray(z, dtype=float))
+        return np.column_stack(
+            [np.zeros(z.shape[0]) if gp is None else gp.std(z) for gp in self.gps]
+        )
+
+    def casadi(self, z: Any) -> list[Any]:
+        """The three corrections as CasADi expressions of the feature column ``z`` (4 x 1)."""
+        return [0 if gp is None else gp.casadi_mean(z) for gp in self.gps]
+
+    def casadi_std(self, z: Any) -> list[Any]:
+        """The three posterior standard deviations as CasADi expressions of ``z`` (4 x 1)."""
+        return [0 if gp is None else gp.casadi_std(z) for gp in self.gps]
+
+    # --- files ------------------------------------------------------------------------------------
+    def _arrays(self) -> list[dict[str, Any] | None]:
+        return [None if gp is None else gp.to_dict() for gp in self.gps]
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready dictionary."""
+        return {"features": list(FEATURES), "label": self.label, "gps": self._arrays()}
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> ModelCorrection:
+        """Inverse of :meth:`to_dict`; a malformed dictionary raises :class:`ModelError`."""
+        if not isinstance(data, Mapping) or "gps" not in data:
+            raise ModelError(
+                "a model correction must be a JSON object with 'gps'; the file was not written "
+                "by racing_lib, or is damaged: learn it again (racing-lib learn)."
+            )
+        if list(data.get("features", FEATURES)) != list(FEATURES):
+            raise ModelError(
+                f"a model correction over the features {data.get('features')} cannot be used; "
+                f"this racing_lib's corrections take {list(FEATURES)}. Learn it again."
+            )
+        gps = data["gps"]
+        if not isinstance(gps, Sequence):
+            raise ModelError("a model correction's 'gps' must be a list of three entries.")
+        return cls(
+            [None if g is None else SparseGP.from_dict(g) for g in gps],
+            label=str(data.get("label", "")),
+        )

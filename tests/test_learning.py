@@ -1,0 +1,242 @@
+"""Learning from laps (chapter 09): the sparse GP, the model correction and the loop.
+
+The GP is checked against a function it must recover, its CasADi form against its NumPy form;
+the correction against the equations it is added to (exactly its mean, nothing else); the residuals
+on real laps of the simulated car (learning must improve the prediction of a lap it did not see);
+the loop for its files, its resumption and its refusals.
+"""
+
+from __future__ import annotations
+
+import json
+
+import casadi as ca
+import numpy as np
+import pytest
+
+from racing_lib.errors import ArgumentError, ModelError
+from racing_lib.experiments.learning import LearnSettings, known_best_lap, learn
+from racing_lib.experiments.pipeline import race
+from racing_lib.face.cli import main
+from racing_lib.model import (
+    CarModel,
+    ModelCorrection,
+    ModelParams,
+    identified_model,
+    model_terms,
+    time_dynamics,
+)
+from racing_lib.model.drive import Drive
+from racing_lib.model.gp import SparseGP, fit_sparse_gp
+from racing_lib.model.residuals import (
+    ResidualSamples,
+    fit_correction,
+    one_step_errors,
+    residual_samples,
+)
+from racing_lib.tracks import load_track
+
+
+def _smooth(x: np.ndarray) -> np.ndarray:
+    return np.sin(1.5 * x[:, 0]) + 0.5 * x[:, 1] ** 2
+
+
+@pytest.fixture(scope="module")
+def gp() -> tuple[SparseGP, np.ndarray, np.ndarray]:
+    rng = np.random.default_rng(3)
+    x = rng.uniform(-1.5, 1.5, size=(600, 2))
+    y = _smooth(x) + 0.05 * rng.standard_normal(600)
+    return fit_sparse_gp(x, y, inducing=30, seed=0), x, y
+
+
+def test_the_gp_recovers_a_smooth_function(gp):
+    model, _, _ = gp
+    test = np.random.default_rng(4).uniform(-1.2, 1.2, size=(300, 2))
+    err = model.mean(test) - _smooth(test)
+    assert np.sqrt(np.mean(err**2)) < 0.1  # the noise is 0.05, the signal about 1
+    assert 0.02 < model.sn < 0.1
+
+
+def test_the_gp_is_unsure_far_from_its_data(gp):
+    model, x, _ = gp
+    near = model.std(x[:50]).max()
+    far = model.std(np.array([[50.0, 50.0]]))[0]
+    assert near < 0.3 * model.sf
+    assert far == pytest.approx(model.sf, rel=1e-3)
+    assert abs(model.mean(np.array([[50.0, 50.0]]))[0]) < 1e-3  # back to the prior mean
+
+
+def test_the_gp_in_casadi_is_the_gp_in_numpy(gp):
+    model, _, _ = gp
+    z = ca.SX.sym("z", 2)
+    f = ca.Function("f", [z], [model.casadi_mean(z), model.casadi_std(z)])
+    pts = np.array([[0.3, -0.2], [1.0, 1.0], [5.0, 0.0]])
+    for p, m, s in zip(pts, model.mean(pts), model.std(pts), strict=True):
+        got_m, got_s = (float(v) for v in f(p))
+        assert got_m == pytest.approx(m, abs=1e-10)
+        assert got_s == pytest.approx(s, abs=2e-3 * model.sf)  # the smooth floor of the sqrt
+
+
+def test_the_gp_is_deterministic_and_round_trips(gp):
+    model, x, y = gp
+    again = fit_sparse_gp(x, y, inducing=30, seed=0)
+    assert np.array_equal(again.w, model.w)
+    back = SparseGP.from_dict(json.loads(json.dumps(model.to_dict())))
+    assert np.array_equal(back.mean(x[:5]), model.mean(x[:5]))
+
+
+@pytest.mark.parametrize(
+    ("x", "y", "match"),
+    [
+        (np.zeros((5, 2)), np.zeros(5), "at least 10"),
+        (np.zeros((20, 2)), np.zeros(19), "must be"),
+        (np.full((20, 2), np.nan), np.zeros(20), "NaN"),
+    ],
+)
+def test_the_gp_refuses_bad_data(x, y, match):
+    with pytest.raises(ModelError, match=match):
+        fit_sparse_gp(x, y)
+
+
+def _correction(scale: float = 1.0) -> ModelCorrection:
+    """A correction with GPs fitted on made-up residuals over the four features."""
+    rng = np.random.default_rng(1)
+    z = np.column_stack(
+        [
+            rng.uniform(10, 50, 300),
+            rng.uniform(-0.08, 0.08, 300),
+            rng.uniform(-0.08, 0.08, 300),
+            rng.uniform(-8, 3, 300),
+        ]
+    )
+    ys = [scale * 0.3 * z[:, 3] / 8, scale * 20 * z[:, 1], -scale * 10 * z[:, 2]]
+    return ModelCorrection([fit_sparse_gp(z, y, inducing=12) for y in ys], label="test")
+
+
+def test_the_equations_add_exactly_the_correction():
+    base = identified_model().params
+    corr = _correction()
+    xi = np.array([30.0, 0.4, 0.2, 0.01, 0.5, 100.0])
+    u = np.array([0.05, -2.0])
+    f0 = np.asarray(time_dynamics(base, identified_model().options)(xi, u, 0.01, 0.0)).ravel()
+    params = base.replace(correction=corr)
+    f1 = np.asarray(time_dynamics(params, identified_model().options)(xi, u, 0.01, 0.0)).ravel()
+    terms = model_terms(base, identified_model().options)(xi=xi, u=u, kappa=0.01, theta=0.0)
+    z = np.array([[xi[0], float(terms["alpha_f"]), float(terms["alpha_r"]), u[1]]])
+    expected = corr.mean(z)[0]
+    assert np.allclose(f1[:3] - f0[:3], expected, atol=1e-12)
+    assert np.array_equal(f1[3:], f0[3:])  # the kinematics are not corrected
+
+
+def test_a_correction_travels_with_its_model():
+    model = identified_model()
+    corrected = model.replace(params=model.params.replace(correction=_correction()))
+    data = json.loads(json.dumps(corrected.to_dict()))
+    back = CarModel.from_dict(data)
+    assert back == corrected
+    assert hash(back.params.correction) == hash(corrected.params.correction)
+    assert "correction" not in model.params.to_dict()  # files without one are unchanged
+    assert model.differences(corrected) == ["parameters correction"]
+    assert _correction(2.0) != _correction()
+
+
+def test_a_damaged_correction_is_refused():
+    with pytest.raises(ModelError, match="racing-lib learn"):
+        ModelParams.from_dict({"correction": {"oops": 1}})
+    with pytest.raises(ModelError, match="features"):
+        ModelParams.from_dict({"correction": {"features": ["v_x"], "gps": [None, None, None]}})
+    with pytest.raises(ModelError, match="ModelCorrection"):
+        ModelParams(correction="learned")  # type: ignore[arg-type]
+
+
+@pytest.fixture(scope="module")
+def two_laps():
+    """Two laps of the main job on the expressway, different seeds (a few seconds)."""
+    result = race("expressway", trials=2, seed=7)
+    return result.track, [lap.log for lap in result.laps]
+
+
+def test_learning_improves_the_prediction_of_an_unseen_lap(two_laps):
+    track, (seen, unseen) = two_laps
+    model = identified_model()
+    corr = fit_correction(residual_samples(seen, track, model), seed=0)
+    learned = model.replace(params=model.params.replace(correction=corr))
+    before = one_step_errors([unseen], track, model)
+    after = one_step_errors([unseen], track, learned)
+    # Measured: v_x 0.51 -> 0.19 m/s^2, v_y 0.42 -> 0.10 m/s^2, r 0.44 -> 0.06 rad/s^2
+    assert after["v_x"] < 0.7 * before["v_x"]
+    assert after["v_y"] < 0.5 * before["v_y"]
+    assert after["r"] < 0.5 * before["r"]
+
+
+def test_residuals_are_taken_against_the_model_as_identified(two_laps):
+    track, (seen, _) = two_laps
+    model = identified_model()
+    corrected = model.replace(params=model.params.replace(correction=_correction()))
+    a = residual_samples(seen, track, model)
+    b = residual_samples(seen, track, corrected)
+    assert np.array_equal(a.residuals, b.residuals)
+    assert np.all(a.features[:, 0] > 5.0)
+
+
+def test_broken_logs_are_refused(two_laps):
+    track, (seen, _) = two_laps
+    cut = Drive(
+        *(getattr(seen, k)[:2] for k in ("t", "x", "y", "psi", "vx", "vy", "r", "steer", "pedal"))
+    )
+    with pytest.raises(ModelError, match="at least 3"):
+        residual_samples(cut, track, identified_model())
+    cols = {
+        k: getattr(seen, k)[:20].copy()
+        for k in ("t", "x", "y", "psi", "vx", "vy", "r", "steer", "pedal")
+    }
+    cols["t"][5] = cols["t"][4]
+    with pytest.raises(ModelError, match="time stamps"):
+        residual_samples(Drive(**cols), track, identified_model())
+    few = residual_samples(seen, track, identified_model())
+    with pytest.raises(ModelError, match="too few"):
+        fit_correction(ResidualSamples(few.features[:20], few.residuals[:20], few.s[:20]))
+    with pytest.raises(ModelError, match="no residual samples"):
+        ResidualSamples.concatenate([])
+
+
+def test_the_best_possible_lap_is_known_for_the_expressway():
+    assert known_best_lap(load_track("expressway")) == pytest.approx(102.95, abs=0.01)
+    assert known_best_lap(load_track("shortcut")) is None
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [({"iterations": -1}, "iterations"), ({"seeds": 0}, "seeds"), ({"edge_margin": -0.1}, "edge")],
+)
+def test_bad_learning_settings_are_refused(kwargs, match):
+    with pytest.raises(ArgumentError, match=match):
+        LearnSettings(**kwargs)
+
+
+@pytest.mark.slow
+def test_the_loop_keeps_and_resumes_its_iterations(tmp_path):
+    settings = LearnSettings(iterations=0, seeds=1, inducing=10)
+    first = learn("expressway", settings, out=tmp_path)
+    assert (tmp_path / "iteration_00" / "summary.json").is_file()
+    lines: list[str] = []
+    again = learn("expressway", LearnSettings(iterations=1, seeds=1, inducing=10), out=tmp_path,
+                  report=lines.append)  # fmt: skip
+    assert lines[0].startswith("iteration 0: kept")
+    assert again.iterations[0] == first.iterations[0]
+    one = again.iterations[1]
+    assert one.samples > 500 and one.grip_margin == 0.0
+    assert one.prediction_error["learned"]["r"] < one.prediction_error["identified"]["r"]
+    assert json.loads(json.dumps(again.to_dict()))["best_possible_lap_s"] == pytest.approx(
+        102.95, abs=0.01
+    )
+    (tmp_path / "iteration_01" / "lap_00.npz").write_bytes(b"not a lap")
+    with pytest.raises(ArgumentError, match="delete the folder"):
+        learn("expressway", LearnSettings(iterations=1, seeds=1, inducing=10), out=tmp_path)
+
+
+@pytest.mark.parametrize("argv", [["--iterations", "-1"], ["--seeds", "0"]])
+def test_the_learn_command_refuses_bad_numbers(argv, capsys):
+    assert main(["learn", *argv]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: --") and err.count("\n") == 1
