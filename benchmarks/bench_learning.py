@@ -14,7 +14,8 @@ wall time of fitting, planning and driving. Then the final laps: mean, spread, w
 track and the gap.
 
 The run is kept in ``--out`` (default runs/learning_TRACK) and resumes where it stopped; delete
-the folder to start again.
+the folder to start again. Its summary, the final laps included, is written to OUT/result.json
+(chapter 09 ships the expressway's as racing_lib/data/learning_expressway.json).
 
 Example: python benchmarks/bench_learning.py --iterations 5 --seeds 4 --final 10
 """
@@ -23,13 +24,12 @@ from __future__ import annotations
 
 import statistics
 import time
+from pathlib import Path
 
 from _script import argument_parser, run
 
-from racing_lib.experiments.learning import LearnSettings, learn
-from racing_lib.experiments.pipeline import race
-from racing_lib.model import CarModel
-from racing_lib.planning import TimeOptimalSettings
+from racing_lib.experiments.learning import LearnSettings, check_best, learn
+from racing_lib.io import atomic_write_json
 from racing_lib.tracks import load_track
 
 
@@ -77,41 +77,23 @@ def main() -> int:
     if best is None:
         print("no clean iteration")
         return 1
-    model = CarModel.from_dict(_model_of(out, best.iteration))
     t0 = time.perf_counter()
-    final = race(
-        track,
-        model=model,
-        trials=args.final,
-        seed=10_000,
-        plan_kwargs={
-            "time_optimal_settings": TimeOptimalSettings(
-                uncertainty_margin=settings.uncertainty_margin * best.caution
-            )
-        },
-    )
-    laps = [lap.metrics for lap in final.laps]
-    done = [m.lap_time_s for m in laps if m.completed]
+    final = check_best(result, track, settings, laps=args.final)
+    done = [t for t in final["lap_times_s"] if t is not None]
     mean = statistics.fmean(done) if done else float("nan")
-    walls = sum(m.wall_contacts for m in laps)
-    off = sum(m.offtrack_time_s for m in laps)
+    spread = statistics.pstdev(done) if done else float("nan")
     gap = "" if best_lap is None else f", {100 * (mean / best_lap - 1):+.2f} % on the best lap"
     print()
     print(f"final: the model of iteration {best.iteration} on {args.final} new seeds: "
-          f"{len(done)}/{len(laps)} completed, {mean:.2f} +- {statistics.pstdev(done):.2f} s"
-          f"{gap}, {walls} wall contacts, {off:.1f} s off track "
+          f"{len(done)}/{args.final} completed, {mean:.2f} +- {spread:.2f} s{gap}, "
+          f"{final['walls']} wall contacts, {final['offtrack_s']:.1f} s off track "
           f"({time.perf_counter() - t0:.0f} s)")  # fmt: skip
     if best_lap is not None:
         print(f"best possible lap {best_lap:.2f} s; the paper's gap to the human best: +1.41 %")
+    summary = {**result.to_dict(), "final": final}
+    atomic_write_json(Path(out) / "result.json", summary)
+    print(f"written: {Path(out) / 'result.json'}")
     return 0
-
-
-def _model_of(out: str, iteration: int) -> dict:
-    import json
-    from pathlib import Path
-
-    path = Path(out) / f"iteration_{iteration:02d}" / "model.json"
-    return json.loads(path.read_text(encoding="utf-8"))
 
 
 if __name__ == "__main__":

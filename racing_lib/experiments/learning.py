@@ -58,6 +58,7 @@ from racing_lib.tracks import load_track
 
 __all__ = [
     "EDGE_SAFETY",
+    "check_best",
     "IterationResult",
     "LearnSettings",
     "LearningRun",
@@ -193,6 +194,8 @@ class LearningRun:
     best_possible_lap_s : float or None
         The best possible lap of the simulated car on this track, where racing_lib knows it.
     iterations : list of IterationResult
+    models : list of CarModel
+        The model each iteration planned and predicted with, correction included.
     out : Path or None
         The folder of the run.
     """
@@ -200,6 +203,7 @@ class LearningRun:
     track: str
     best_possible_lap_s: float | None
     iterations: list[IterationResult]
+    models: list[CarModel] = field(default_factory=list, repr=False)
     out: Path | None = None
 
     def to_dict(self) -> dict[str, Any]:
@@ -234,7 +238,7 @@ def _iteration_dir(out: Path, i: int) -> Path:
     return out / f"iteration_{i:02d}"
 
 
-def _load_done(out: Path, i: int) -> tuple[IterationResult, list[LapLog]] | None:
+def _load_done(out: Path, i: int) -> tuple[IterationResult, list[LapLog], CarModel] | None:
     """A finished iteration from its folder, or None when it did not finish."""
     folder = _iteration_dir(out, i)
     summary = folder / "summary.json"
@@ -244,12 +248,13 @@ def _load_done(out: Path, i: int) -> tuple[IterationResult, list[LapLog]] | None
         data = json.loads(summary.read_text(encoding="utf-8"))
         result = IterationResult(**data["result"])
         logs = [LapLog.load(folder / name) for name in data["clean_logs"]]
+        model = CarModel.from_dict(json.loads((folder / "model.json").read_text(encoding="utf-8")))
     except (OSError, ValueError, TypeError, KeyError, EOFError, BadZipFile, ModelError) as exc:
         raise ArgumentError(
             f"{summary} is damaged ({exc}); delete the folder {folder} to drive that iteration "
             "again."
         ) from None
-    return result, logs
+    return result, logs, model
 
 
 def _clean(lap: LapResult) -> bool:
@@ -351,7 +356,7 @@ def learn(
         out_dir.mkdir(parents=True, exist_ok=True)
     best = known_best_lap(track_obj) if car is None else None
     say = report or (lambda line: None)
-    run = LearningRun(track_obj.name, best, [], out_dir)
+    run = LearningRun(track_obj.name, best, [], out=out_dir)
     logs: list[LapLog] = []
     samples: list[ResidualSamples] = []
 
@@ -363,15 +368,16 @@ def learn(
     for i in range(settings.iterations + 1):
         done = None if out_dir is None else _load_done(out_dir, i)
         if done is not None:
-            result, new_logs = done
+            result, new_logs, model = done
             say(f"iteration {i}: kept from {_iteration_dir(out_dir, i)}")
         else:
             previous = run.iterations[-1] if run.iterations else None
-            result, new_logs = _run_iteration(
+            result, new_logs, model = _run_iteration(
                 i, track_obj, base, car, settings, samples, previous, out_dir, best
             )
             say(_line(result))
         run.iterations.append(result)
+        run.models.append(model)
         logs += new_logs
         samples += [residual_samples(log, track_obj, base) for log in new_logs]
         if bar is not None:
@@ -391,7 +397,7 @@ def _run_iteration(
     previous: IterationResult | None,
     out: Path | None,
     best: float | None,
-) -> tuple[IterationResult, list[LapLog]]:
+) -> tuple[IterationResult, list[LapLog], CarModel]:
     """Fit (from iteration 1 on), plan and drive one iteration."""
     t0 = time.perf_counter()
     correction = None
@@ -456,7 +462,54 @@ def _run_iteration(
     )
     if out is not None:
         _save_done(out, iteration, laps, model)
-    return iteration, [lap.log for lap in laps if _clean(lap)]
+    return iteration, [lap.log for lap in laps if _clean(lap)], model
+
+
+def check_best(
+    run: LearningRun,
+    track: str | os.PathLike[str] | Track,
+    settings: LearnSettings = LearnSettings(),
+    *,
+    laps: int = 10,
+    seed: int = 10_000,
+    car: PlantFactory | None = None,
+) -> dict[str, Any]:
+    """Drive the model of the fastest clean iteration on seeds no iteration used.
+
+    Re-plans with that model (and its iteration's caution) and drives ``laps`` seeded laps from
+    ``seed`` on; the learning iterations' seeds stay below it.
+
+    Returns
+    -------
+    dict
+        ``iteration``, ``seeds``, ``lap_times_s`` (None for a lap not completed), ``walls``,
+        ``offtrack_s``.
+
+    Raises
+    ------
+    ModelError
+        The run has no clean iteration.
+    """
+    best = run.best()
+    if best is None:
+        raise ModelError("no clean iteration to check: every iteration touched a wall.")
+    margin = settings.uncertainty_margin * best.caution
+    result = race(
+        track,
+        model=run.models[best.iteration],
+        car=car,
+        trials=laps,
+        seed=seed,
+        plan_kwargs={"time_optimal_settings": TimeOptimalSettings(uncertainty_margin=margin)},
+    )
+    metrics = [lap.metrics for lap in result.laps]
+    return {
+        "iteration": best.iteration,
+        "seeds": [m.seed for m in metrics],
+        "lap_times_s": [m.lap_time_s if m.completed else None for m in metrics],
+        "walls": int(sum(m.wall_contacts for m in metrics)),
+        "offtrack_s": float(sum(m.offtrack_time_s for m in metrics)),
+    }
 
 
 def _line(it: IterationResult) -> str:
