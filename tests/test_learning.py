@@ -235,6 +235,17 @@ def test_the_loop_keeps_and_resumes_its_iterations(tmp_path):
         learn("expressway", LearnSettings(iterations=1, seeds=1, inducing=10), out=tmp_path)
 
 
+@pytest.mark.slow
+def test_the_loop_is_deterministic_under_its_seed(tmp_path):
+    settings = LearnSettings(iterations=1, seeds=1, inducing=10, seed=3)
+    kept = learn("expressway", settings, out=tmp_path)
+    again = learn("expressway", settings)  # in memory, from scratch
+    for a, b in zip(kept.iterations, again.iterations, strict=True):
+        assert a.planned_lap_s == b.planned_lap_s
+        assert (a.driven_lap_s, a.walls) == (b.driven_lap_s, b.walls)
+    assert again.models[1] == kept.models[1]  # the same correction, to the last digit
+
+
 @pytest.mark.parametrize("argv", [["--iterations", "-1"], ["--seeds", "0"]])
 def test_the_learn_command_refuses_bad_numbers(argv, capsys):
     assert main(["learn", *argv]) == 2

@@ -419,3 +419,83 @@ def lap_animation(
     anim = FuncAnimation(fig, draw, frames=frames, interval=120, blit=True)
     plt.close(fig)  # shown through the animation's HTML, not as a still
     return anim
+
+
+#: The paper's gap between its closed loop and the best human lap, % (its Table II).
+PAPER_GAP_PCT = 1.41
+
+
+def plot_correction_along_lap(
+    s: np.ndarray,
+    measured: np.ndarray,
+    mean: np.ndarray,
+    std: np.ndarray,
+    axes: Sequence[Axes] | None = None,
+) -> Sequence[Axes]:
+    """Residual accelerations of a lap against a learned correction's mean and +-2 std.
+
+    Parameters
+    ----------
+    s : ndarray (N,)
+        Arc length of each sample, m.
+    measured, mean, std : ndarray (N, 3)
+        The measured residuals of ``(v_x, v_y, r)`` and the correction's mean and standard
+        deviation there (m/s^2, m/s^2, rad/s^2), e.g. from
+        :func:`racing_lib.model.residuals.residual_samples` and
+        :class:`racing_lib.model.ModelCorrection`.
+    axes : two Axes, optional
+        Where to draw the yaw rate's and the lateral speed's residuals; a new figure when omitted.
+    """
+    if axes is None:
+        _, axes = plt.subplots(2, 1, figsize=(9.0, 5.5), sharex=True)
+    order = np.argsort(s)
+    x = np.asarray(s)[order]
+    labels = {2: "r residual (rad/s$^2$)", 1: "$v_y$ residual (m/s$^2$)"}
+    for ax, j in zip(axes, (2, 1), strict=True):
+        m, sd = mean[order, j], std[order, j]
+        ax.plot(x, measured[order, j], ".", ms=2, color="0.5", label="measured")
+        ax.plot(x, m, lw=1.2, color=COLORS["plan"], label="learned mean")
+        ax.fill_between(x, m - 2 * sd, m + 2 * sd, alpha=0.3, color=COLORS["plan"],
+                        label="mean $\\pm$ 2 sd")  # fmt: skip
+        ax.set_ylabel(labels[j])
+    axes[0].legend(loc="upper right", ncol=3, fontsize=8)
+    axes[-1].set_xlabel("s along the centerline (m)")
+    return axes
+
+
+def plot_learning(
+    iterations: Sequence[Mapping[str, Any]], best_lap: float, ax: Axes | None = None
+) -> Axes:
+    """Planned and driven lap times over the iterations of a learning run.
+
+    Parameters
+    ----------
+    iterations : sequence of dict
+        The ``iterations`` of :meth:`racing_lib.experiments.learning.LearningRun.to_dict`.
+    best_lap : float
+        The best possible lap, s, drawn with the paper's gap (+1.41 %) and the +1.0 % goal.
+    ax : Axes, optional
+        Where to draw; a new figure when omitted. An iteration with wall contacts is marked by a
+        cross at the top: its lap is off the chart.
+    """
+    if ax is None:
+        _, ax = plt.subplots(figsize=(8.0, 4.0))
+    top = best_lap * 1.035
+    clean = [it for it in iterations if it["walls"] == 0 and it["completed"] == it["laps"]]
+    unclean = [it for it in iterations if it not in clean]
+    k_all = [it["iteration"] for it in iterations]
+    ax.plot(k_all, [it["planned_lap_s"] for it in iterations], "s--", color=COLORS["plan"],
+            label="planned")  # fmt: skip
+    ax.plot([it["iteration"] for it in clean], [it["driven_lap_s"] for it in clean], "o-",
+            color=COLORS["closed loop"], label="driven, clean (mean of the seeds)")  # fmt: skip
+    ax.plot([it["iteration"] for it in unclean], [top - 0.1] * len(unclean), "x",
+            color="crimson", ms=9, label="driven, with wall contacts (off the chart)")  # fmt: skip
+    ax.axhline(best_lap, color="k", lw=1, label="best possible lap")
+    ax.axhline(best_lap * (1 + PAPER_GAP_PCT / 100), color="crimson", lw=1, ls=":",
+               label=f"+{PAPER_GAP_PCT} % (the paper's gap to the human best)")  # fmt: skip
+    ax.axhline(best_lap * 1.01, color=COLORS["best lap"], lw=1, ls="-.", label="+1.0 %")
+    ax.set_ylim(best_lap - 0.5, top)
+    ax.set_xlabel("iteration")
+    ax.set_ylabel("lap time (s)")
+    ax.legend(loc="upper right", fontsize=8)
+    return ax
