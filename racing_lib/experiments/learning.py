@@ -14,17 +14,19 @@ What replaces the blanket margins in a learned iteration:
 
 * the **grip margin** (5 % of the friction everywhere) gives way to the correction's own
   uncertainty: the friction ellipse of the plan shrinks by ``uncertainty_margin`` posterior
-  standard deviations of the learned lateral acceleration, node by node
-  (:attr:`racing_lib.planning.TimeOptimalSettings.uncertainty_margin`): close to the limit where
-  the laps went, away from it where they did not;
-* the **edge margin** (0.8 m to a wall) becomes ``edge_margin`` (0.4 m by default), or the
-  largest lateral tracking error of the iteration before plus :data:`EDGE_SAFETY`, whichever is
-  larger: the corrected model lets the MPC track its line to a few centimetres, and the margin
-  follows what was measured.
+  standard deviations of the learned accelerations (longitudinal and lateral, each on its axis),
+  node by node (:attr:`racing_lib.planning.TimeOptimalSettings.uncertainty_margin`): close to
+  the limit where the laps went, away from it where they did not;
+* the **edge margin** (0.8 m to a wall) becomes ``edge_margin`` (0.4 m by default), raised to the
+  largest lateral tracking error of the iteration before plus :data:`EDGE_SAFETY` when that
+  iteration was a clean learned one (the identified model's tracking, and that of an iteration
+  that went wrong, say nothing of how closely the corrected model tracks).
 
 A lap that touched a wall or left the track is not learned from (its log holds the wall's forces,
-not the car's). Every finished iteration is written to its own folder, so an interrupted run
-resumes where it stopped and loses no finished iteration.
+not the car's), and the iteration after one that was not clean doubles its caution (the factor on
+the uncertainty margin). Every finished iteration is written to its own folder, with the run's
+track, settings and model in ``run.json``, so an interrupted run resumes where it stopped and
+loses no finished iteration; a folder of another run is refused.
 """
 
 from __future__ import annotations
@@ -45,7 +47,7 @@ from racing_lib.errors import ArgumentError, ModelError
 from racing_lib.experiments.lap import LapLog, LapResult, PlantFactory
 from racing_lib.experiments.pipeline import race
 from racing_lib.geometry import Track
-from racing_lib.io import atomic_write_json
+from racing_lib.io import atomic_write_json, jsonable
 from racing_lib.model import CarModel, ModelCorrection, identified_model
 from racing_lib.model.residuals import (
     ResidualSamples,
@@ -234,6 +236,44 @@ def known_best_lap(track: Track) -> float | None:
     return None
 
 
+def _run_identity(
+    track: Track, settings: LearnSettings, base: CarModel, car: PlantFactory | None
+) -> dict[str, Any]:
+    """What a kept run must share with the one that resumes it."""
+    return {
+        "track": track.checksum(),
+        "settings": asdict(settings),
+        "model": base.to_dict(),
+        "car": None if car is None else repr(car),
+    }
+
+
+def _check_run_folder(out: Path, identity: dict[str, Any]) -> None:
+    """Create ``out``, or refuse it when it is a file or holds another run."""
+    if out.exists() and not out.is_dir():
+        raise ArgumentError(f"--out {out} is a file; name a folder for the run's iterations.")
+    out.mkdir(parents=True, exist_ok=True)
+    path = out / "run.json"
+    if not path.is_file():
+        atomic_write_json(path, jsonable(identity))
+        return
+    try:
+        kept = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError) as exc:
+        raise ArgumentError(f"{path} is damaged ({exc}); start the run in a new folder.") from None
+    mine = jsonable(identity)
+    # Settings may differ only in how many iterations are asked for: more resumes the run
+    same = {k: v for k, v in mine["settings"].items() if k != "iterations"}
+    theirs = {k: v for k, v in kept.get("settings", {}).items() if k != "iterations"}
+    differ = [k for k in ("track", "model", "car") if kept.get(k) != mine[k]]
+    differ += [f"settings.{k}" for k in sorted(same) if theirs.get(k) != same[k]]
+    if differ:
+        raise ArgumentError(
+            f"{out} holds a run with another {', '.join(differ)}; resume it with the same "
+            "track, car and settings, or start this run in a new folder."
+        )
+
+
 def _iteration_dir(out: Path, i: int) -> Path:
     return out / f"iteration_{i:02d}"
 
@@ -251,8 +291,8 @@ def _load_done(out: Path, i: int) -> tuple[IterationResult, list[LapLog], CarMod
         model = CarModel.from_dict(json.loads((folder / "model.json").read_text(encoding="utf-8")))
     except (OSError, ValueError, TypeError, KeyError, EOFError, BadZipFile, ModelError) as exc:
         raise ArgumentError(
-            f"{summary} is damaged ({exc}); delete the folder {folder} to drive that iteration "
-            "again."
+            f"{summary} is damaged ({exc}); delete the folder {folder} and every later "
+            "iteration's folder to drive them again."
         ) from None
     return result, logs, model
 
@@ -282,11 +322,12 @@ def _save_done(
 
 
 def _caution(previous: IterationResult | None) -> float:
-    """Factor on the uncertainty margin: doubled after an iteration that was not clean.
+    """Factor on the uncertainty margin: doubled after a learned iteration that was not clean.
 
-    An iteration whose laps touched a wall taught nothing (its laps are not learned from), so
-    the next one would fit the same correction and make the same plan: it must keep farther
-    from what the correction is unsure of instead. A clean iteration keeps its caution.
+    The laps of such an iteration that touched a wall are not learned from, so the next one
+    would fit nearly the same correction and make nearly the same plan: it must keep farther
+    from what the correction is unsure of instead. A clean iteration keeps its caution; the
+    first learned iteration starts at 1.
     """
     if previous is None or previous.iteration == 0:
         return 1.0
@@ -353,7 +394,7 @@ def learn(
         base = base.replace(params=base.params.replace(correction=None))
     out_dir = None if out is None else Path(out)
     if out_dir is not None:
-        out_dir.mkdir(parents=True, exist_ok=True)
+        _check_run_folder(out_dir, _run_identity(track_obj, settings, base, car))
     best = known_best_lap(track_obj) if car is None else None
     say = report or (lambda line: None)
     run = LearningRun(track_obj.name, best, [], out=out_dir)
@@ -371,6 +412,11 @@ def learn(
             result, new_logs, model = done
             say(f"iteration {i}: kept from {_iteration_dir(out_dir, i)}")
         else:
+            if out_dir is not None and _load_done(out_dir, i + 1) is not None:
+                raise ArgumentError(
+                    f"{_iteration_dir(out_dir, i)} is missing but later iterations are kept, "
+                    "fitted on its laps; delete the later iterations' folders too."
+                )
             previous = run.iterations[-1] if run.iterations else None
             result, new_logs, model = _run_iteration(
                 i, track_obj, base, car, settings, samples, previous, out_dir, best
@@ -471,13 +517,14 @@ def check_best(
     settings: LearnSettings = LearnSettings(),
     *,
     laps: int = 10,
-    seed: int = 10_000,
+    seed: int | None = None,
     car: PlantFactory | None = None,
 ) -> dict[str, Any]:
     """Drive the model of the fastest clean iteration on seeds no iteration used.
 
-    Re-plans with that model (and its iteration's caution) and drives ``laps`` seeded laps from
-    ``seed`` on; the learning iterations' seeds stay below it.
+    Re-plans with that model (with the run's ``settings`` and its iteration's caution) and
+    drives ``laps`` seeded laps from ``seed`` on; default: the first seed after every
+    iteration's (``settings.seed + 1000 * len(run.iterations)``).
 
     Returns
     -------
@@ -494,6 +541,8 @@ def check_best(
     if best is None:
         raise ModelError("no clean iteration to check: every iteration touched a wall.")
     margin = settings.uncertainty_margin * best.caution
+    if seed is None:
+        seed = settings.seed + 1000 * len(run.iterations)
     result = race(
         track,
         model=run.models[best.iteration],

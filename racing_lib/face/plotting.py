@@ -475,13 +475,17 @@ def plot_learning(
     best_lap : float
         The best possible lap, s, drawn with the paper's gap (+1.41 %) and the +1.0 % goal.
     ax : Axes, optional
-        Where to draw; a new figure when omitted. An iteration with wall contacts is marked by a
-        cross at the top: its lap is off the chart.
+        Where to draw; a new figure when omitted. An iteration that was not clean (wall contacts,
+        time off the track, a lap not completed) is marked by a cross at the top of the chart.
     """
     if ax is None:
         _, ax = plt.subplots(figsize=(8.0, 4.0))
     top = best_lap * 1.035
-    clean = [it for it in iterations if it["walls"] == 0 and it["completed"] == it["laps"]]
+    clean = [
+        it
+        for it in iterations
+        if it["walls"] == 0 and it["offtrack_s"] == 0 and it["completed"] == it["laps"]
+    ]
     unclean = [it for it in iterations if it not in clean]
     k_all = [it["iteration"] for it in iterations]
     ax.plot(k_all, [it["planned_lap_s"] for it in iterations], "s--", color=COLORS["plan"],
@@ -489,7 +493,7 @@ def plot_learning(
     ax.plot([it["iteration"] for it in clean], [it["driven_lap_s"] for it in clean], "o-",
             color=COLORS["closed loop"], label="driven, clean (mean of the seeds)")  # fmt: skip
     ax.plot([it["iteration"] for it in unclean], [top - 0.1] * len(unclean), "x",
-            color="crimson", ms=9, label="driven, with wall contacts (off the chart)")  # fmt: skip
+            color="crimson", ms=9, label="driven, not clean (off the chart)")  # fmt: skip
     ax.axhline(best_lap, color="k", lw=1, label="best possible lap")
     ax.axhline(best_lap * (1 + PAPER_GAP_PCT / 100), color="crimson", lw=1, ls=":",
                label=f"+{PAPER_GAP_PCT} % (the paper's gap to the human best)")  # fmt: skip

@@ -104,7 +104,7 @@ class ModelCorrection:
 
     # --- evaluation -------------------------------------------------------------------------------
     def mean(self, z: np.ndarray) -> np.ndarray:
-        """The correction at features ``z`` (N, 5): shape (N, 3), in m/s^2, m/s^2, rad/s^2."""
+        """The correction at features ``z`` (N, 4): shape (N, 3), in m/s^2, m/s^2, rad/s^2."""
         z = np.atleast_2d(np.asarray(z, dtype=float))
         return np.column_stack(
             [np.zeros(z.shape[0]) if gp is None else gp.mean(z) for gp in self.gps]

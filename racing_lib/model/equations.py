@@ -335,8 +335,9 @@ def model_terms(
 
     ``(xi, u, kappa, theta) -> s_dot (m/s), alpha_f, alpha_r (rad), F_zf, F_zr, F_yf, F_yr, F_xw,
     R_x, delta_W, delta_W_F, delta_W_R (N), a_y (m/s^2), a_x_std, a_y_std`` (m/s^2: the
-    posterior standard deviations of a learned correction of ``v_x_dot`` and ``v_y_dot``, zero
-    without one). Use ``fn(xi=..., u=..., ...)["F_zf"]``.
+    posterior standard deviations of a learned correction of ``v_x_dot`` and of ``v_y_dot``, the
+    uncertainty along the two axes of the friction ellipse; zero without a correction). Use
+    ``fn(xi=..., u=..., ...)["F_zf"]``.
     """
     check_args(params, options)
     xi, u, kappa, theta = _symbols()

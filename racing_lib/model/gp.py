@@ -121,7 +121,7 @@ class SparseGP:
         k = self._casadi_k(x)
         var = self.sf**2 - ca.dot(k, ca.mtimes(ca.DM(self.c), k))
         # a smooth floor keeps the square root differentiable where the GP is certain
-        return ca.sqrt(var + (1e-3 * self.sf) ** 2)
+        return ca.sqrt(ca.fmax(var, 0.0) + (1e-3 * self.sf) ** 2)
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dictionary (floats exactly, as lists)."""

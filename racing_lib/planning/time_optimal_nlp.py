@@ -59,6 +59,10 @@ SPEED_SCALE = 30.0
 _NW = len(NLP_VARS)
 _ROWS = {name: i for i, name in enumerate(NLP_VARS)}
 
+#: Largest share of the friction ellipse that a learned correction's uncertainty may take at a
+#: node (TimeOptimalSettings.uncertainty_margin): where it would take more, the plan does not go.
+MAX_UNCERTAIN_SHARE = 0.9
+
 
 @dataclass(frozen=True)
 class IntervalFunctions:
@@ -148,6 +152,13 @@ def _path_constraints(
         path.append(ellipse)
         lb.append(-np.inf)
         ub.append(1.0)
+        if params.correction is not None and st.uncertainty_margin > 0.0:
+            # (1 - share)^2 shrinks the ellipse only while share < 1: beyond, it would grow
+            # again where the correction is least sure. The plan keeps the share below
+            # MAX_UNCERTAIN_SHARE instead, away from what the laps have not seen.
+            path.append(share / MAX_UNCERTAIN_SHARE)
+            lb.append(-np.inf)
+            ub.append(1.0)
     if st.drive_axle_circle:
         # Rear-wheel drive: the rear tyres alone carry the drive force, on top of their share of
         # the cornering force, inside their own friction circle.
