@@ -1,6 +1,7 @@
 """The ``racing-lib`` command.
 
-Sub-commands (see ``racing-lib --help``): ``tracks``, ``plan``, ``lap``, ``tune``, ``ablation``.
+Sub-commands (see ``racing-lib --help``): ``tracks``, ``plan``, ``lap``, ``tune``, ``ablation``,
+``learn``.
 With ``--json`` a command prints exactly one JSON object on standard output; everything meant for a
 person goes to standard error. Errors of racing_lib are printed as one line (``error: ...``) with
 exit status 2, never as a traceback.
@@ -16,8 +17,6 @@ from collections.abc import Sequence
 from pathlib import Path as FilePath
 from typing import Any
 
-import numpy as np
-
 from racing_lib.errors import PlantError, RacingLibError
 from racing_lib.face.console import _clean, _emit_json, _say
 from racing_lib.face.learn_command import add_learn_parser
@@ -25,6 +24,7 @@ from racing_lib.face.output_places import (
     check_output_dir,
     check_output_file,
 )
+from racing_lib.face.tracks_command import add_tracks_parser
 from racing_lib.io import atomic_savefig, atomic_write_json, jsonable
 from racing_lib.model import CarModel, ModelOptions, identified_model
 from racing_lib.planning import METHODS, STARTS, TimeOptimalSettings, plan
@@ -36,50 +36,6 @@ from racing_lib.plants import CARS
 # `racing-lib --help` and the refusal of bad arguments stay instant.
 
 DEFAULT_TRACK = "expressway"
-
-
-# --------------------------------------------------------------------------------------------------
-# tracks
-
-
-def cmd_tracks(args: argparse.Namespace) -> int:
-    """List the built-in tracks with their length, width range and boundary kind."""
-    # Per command: the built-in tracks are not needed for --help (see the note at the top).
-    from racing_lib.tracks import (
-        builtin_track_names,
-        load_track,
-    )
-
-    rows = []
-    for name in builtin_track_names():
-        track = load_track(name)
-        s = np.linspace(0.0, track.length, 2000, endpoint=False)
-        width = track.width_left(s) + track.width_right(s)
-        kappa = np.abs(track.centerline.curvature(s))
-        z = track.elevation(s)
-        rows.append(
-            {
-                "name": name,
-                "length_m": round(float(track.length), 1),
-                "width_min_m": round(float(width.min()), 2),
-                "width_max_m": round(float(width.max()), 2),
-                "min_radius_m": round(float(1.0 / kappa.max()), 1),
-                "elevation_range_m": round(float(z.max() - z.min()), 2),
-                "boundary": track.boundary,
-            }
-        )
-    if args.json:
-        _emit_json({"tracks": rows})
-    else:
-        header = f"{'name':<12} {'length':>9} {'width':>13} {'min R':>8} {'dz':>7}  boundary"
-        print(header)
-        for r in rows:
-            print(
-                f"{r['name']:<12} {r['length_m']:>7.1f} m "
-                f"{r['width_min_m']:>5.1f}-{r['width_max_m']:<5.1f}m "
-                f"{r['min_radius_m']:>6.1f} m {r['elevation_range_m']:>5.1f} m  {r['boundary']}"
-            )
-    return 0
 
 
 # --------------------------------------------------------------------------------------------------
@@ -549,9 +505,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sub = parser.add_subparsers(dest="command", required=True)
 
-    p = sub.add_parser("tracks", help="list the built-in tracks")
-    p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
-    p.set_defaults(func=cmd_tracks)
+    add_tracks_parser(sub)
 
     p = sub.add_parser("plan", help="plan a lap of a track")
     _add_track(p)

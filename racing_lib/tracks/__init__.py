@@ -11,7 +11,8 @@ cached for the rest of the session (generation takes a fraction of a second).
 
 The registry: :func:`load_track` loads them by name (or a CSV file), :func:`builtin_track_names`
 lists them; make your own with
-:func:`track_from_segments`. The cached tracks are shared: treat them as read-only.
+:func:`track_from_segments`, or draw random circuits with :func:`generate`
+(:mod:`racing_lib.tracks.generator`). The cached tracks are shared: treat them as read-only.
 Taught in notebook 00.
 """
 
@@ -27,11 +28,13 @@ import numpy as np
 from racing_lib.errors import TrackError
 from racing_lib.geometry import Corner, Path, Track
 from racing_lib.tracks import expressway, shortcut
+from racing_lib.tracks.generator import CircuitSpec, generate
 from racing_lib.tracks.segments import Arc, Straight, build_centerline, track_from_segments
 
 __all__ = [
     "BUILTIN",
     "Arc",
+    "CircuitSpec",
     "Straight",
     "build_centerline",
     "builtin_track_names",
@@ -40,6 +43,7 @@ __all__ = [
     "crucial_corners",
     "expressway_track",
     "figure_eight_track",
+    "generate",
     "load_track",
     "shortcut_track",
     "track_from_segments",
