@@ -76,7 +76,11 @@ def _reference(track, plans_dir: Path | None) -> tuple[Trajectory, int, float]:
 
 def circuit_row(path: Path, seeds: list[int], plans_dir: Path | None) -> dict:
     """Plan and drive one circuit; the row of the table as a dict."""
-    track = load_track(path)
+    return drive_circuit(load_track(path), seeds, plans_dir)[0]
+
+
+def drive_circuit(track, seeds: list[int], plans_dir: Path | None) -> tuple[dict, object, object]:
+    """Plan and drive one circuit: the row of the table, the race result and the plan."""
     reference, iterations, plan_wall = _reference(track, plans_dir)
     result = race(track, controller="coupled-mpc", reference=reference, seed=seeds[0],
                   trials=len(seeds))  # fmt: skip
@@ -86,25 +90,29 @@ def circuit_row(path: Path, seeds: list[int], plans_dir: Path | None) -> dict:
     steps = np.concatenate([lap.log.solve_ms for lap in result.laps])
     stats = [m.controller_stats for m in metrics]
     n = len(metrics)
-    return {
-        "circuit": track.name,
-        "length_km": track.length / 1000.0,
-        "planned_s": reference.lap_time,
-        "nlp_iter": iterations,
-        "plan_wall_s": plan_wall,
-        "lap_mean_s": float(np.mean(laps)),
-        "lap_best_s": float(np.min(laps)),
-        "gap_pct": 100.0 * (float(np.mean(laps)) / reference.lap_time - 1.0),
-        "walls": int(sum(m.wall_contacts for m in metrics)),
-        "offtrack_s": float(sum(m.offtrack_time_s for m in metrics)),
-        "ey_max_m": float(max(m.ey_max_m for m in metrics)),
-        "qp_fail_per_lap": sum(s.get("qp_failures", 0.0) for s in stats) / n,
-        "qp_rescue_per_lap": sum(s.get("qp_rescues", 0.0) for s in stats) / n,
-        "step_med_ms": float(np.median(steps)),
-        "step_p99_ms": float(np.percentile(steps, 99)),
-        "completed": f"{len(done)}/{n}",
-        "weights": result.weights_source,
-    }
+    return (
+        {
+            "circuit": track.name,
+            "length_km": track.length / 1000.0,
+            "planned_s": reference.lap_time,
+            "nlp_iter": iterations,
+            "plan_wall_s": plan_wall,
+            "lap_mean_s": float(np.mean(laps)),
+            "lap_best_s": float(np.min(laps)),
+            "gap_pct": 100.0 * (float(np.mean(laps)) / reference.lap_time - 1.0),
+            "walls": int(sum(m.wall_contacts for m in metrics)),
+            "offtrack_s": float(sum(m.offtrack_time_s for m in metrics)),
+            "ey_max_m": float(max(m.ey_max_m for m in metrics)),
+            "qp_fail_per_lap": sum(s.get("qp_failures", 0.0) for s in stats) / n,
+            "qp_rescue_per_lap": sum(s.get("qp_rescues", 0.0) for s in stats) / n,
+            "step_med_ms": float(np.median(steps)),
+            "step_p99_ms": float(np.percentile(steps, 99)),
+            "completed": f"{len(done)}/{n}",
+            "weights": result.weights_source,
+        },
+        result,
+        reference,
+    )
 
 
 def _print_table(rows: list[dict]) -> None:

@@ -228,6 +228,25 @@ def test_what_the_plan_asks_of_the_car_against_what_it_has(oval, nlp):
     assert demands["edge clearance"].peak > OPEN_MARGIN - 0.05
 
 
+def test_demands_of_one_stretch_of_the_plan(oval, nlp):
+    from racing_lib.errors import PlanningError
+    from racing_lib.planning.demands import plan_demands
+
+    plan_ = nlp.trajectory
+    whole = {d.name: d for d in plan_demands(plan_, PARAMS)}
+    # A stretch around the node of the largest steering angle holds that node; a stretch that
+    # wraps past the line is accepted; each stretch's largest value is no more than the lap's.
+    at = whole["steering angle"].s
+    near = {d.name: d for d in plan_demands(plan_, PARAMS, where=(at - 30.0, at + 30.0))}
+    assert near["steering angle"].peak == whole["steering angle"].peak
+    wrapped = plan_demands(plan_, PARAMS, where=(plan_.length - 40.0, 40.0))
+    for d in wrapped:
+        assert d.s <= 40.0 or d.s >= plan_.length - 40.0
+        assert d.peak <= whole[d.name].peak
+    with pytest.raises(PlanningError, match="no plan node"):
+        plan_demands(plan_, PARAMS, where=(10.0, 10.1))
+
+
 W_DAX = TimeOptimalSettings().w_dax
 
 

@@ -73,9 +73,24 @@ class Demand:
         return self.peak / self.limit
 
 
-def _largest(name: str, unit: str, values: np.ndarray, s: np.ndarray, limit: float) -> Demand:
-    k = int(np.argmax(values))
+def _largest(
+    name: str, unit: str, values: np.ndarray, s: np.ndarray, limit: float, inside: np.ndarray
+) -> Demand:
+    k = int(np.flatnonzero(inside)[np.argmax(values[inside])])
     return Demand(name, unit, float(values[k]), float(s[k]), float(limit))
+
+
+def _inside(s: np.ndarray, length: float, where: tuple[float, float] | None) -> np.ndarray:
+    """The nodes in the stretch ``where`` = (start, end) of the lap, m (it may wrap past 0)."""
+    if where is None:
+        return np.ones(s.shape, dtype=bool)
+    start, end = (float(v) % length for v in where)
+    inside = (s >= start) & (s <= end) if start <= end else (s >= start) | (s <= end)
+    if not inside.any():
+        raise PlanningError(
+            f"no plan node between s = {where[0]} and {where[1]} m; give a longer stretch."
+        )
+    return inside
 
 
 def plan_demands(
@@ -83,6 +98,7 @@ def plan_demands(
     params: ModelParams | None = None,
     vehicle: VehicleParams | None = None,
     track: Track | None = None,
+    where: tuple[float, float] | None = None,
 ) -> list[Demand]:
     """The largest demand of each kind along ``trajectory`` (see the module notes).
 
@@ -97,6 +113,9 @@ def plan_demands(
         The car's actuator and engine (default: the simulated car's ``VehicleParams()``).
     track : Track, optional
         For the edge clearance and the grade.
+    where : (float, float), optional
+        Only the stretch from ``start`` to ``end`` of the plan's arc length, m (it may wrap past
+        the line), for example the approach to a point where a lap went wrong.
 
     Returns
     -------
@@ -118,6 +137,7 @@ def plan_demands(
     r = np.asarray(trajectory.r, dtype=float)
     delta = np.asarray(trajectory.delta, dtype=float)
     ax = np.asarray(trajectory.ax, dtype=float)
+    inside = _inside(s, trajectory.length, where)
 
     # Time derivatives on the closed lap (the node after the last is the first, one lap later).
     t_next = np.append(t[1:], trajectory.lap_time)
@@ -140,22 +160,22 @@ def plan_demands(
     power = params.m * np.maximum(ax, 0.0) * vx / 1e3
     power_max = vehicle.power_max * vehicle.driveline_efficiency / 1e3
     out = [
-        _largest("tyre use", "-", use, s, 1.0),
-        _largest("front slip", "deg", np.degrees(np.abs(alpha_f)), s, math.degrees(a_f)),
-        _largest("rear slip", "deg", np.degrees(np.abs(alpha_r)), s, math.degrees(a_r)),
-        _largest("yaw rate", "rad/s", np.abs(r), s, math.nan),
-        _largest("steering angle", "rad", np.abs(delta), s, vehicle.steer_max),
-        _largest("steering rate", "rad/s", steer_rate, s, vehicle.steer_rate_max),
-        _largest("drive power", "kW", power, s, power_max),
+        _largest("tyre use", "-", use, s, 1.0, inside),
+        _largest("front slip", "deg", np.degrees(np.abs(alpha_f)), s, math.degrees(a_f), inside),
+        _largest("rear slip", "deg", np.degrees(np.abs(alpha_r)), s, math.degrees(a_r), inside),
+        _largest("yaw rate", "rad/s", np.abs(r), s, math.nan, inside),
+        _largest("steering angle", "rad", np.abs(delta), s, vehicle.steer_max, inside),
+        _largest("steering rate", "rad/s", steer_rate, s, vehicle.steer_rate_max, inside),
+        _largest("drive power", "kW", power, s, power_max, inside),
     ]
     if track is not None:
         s_c, e_c = track.centerline.to_frenet_along(trajectory.x, trajectory.y)
         gap = np.minimum(track.width_left(s_c) - e_c, track.width_right(s_c) + e_c)
         gap = gap - 0.5 * vehicle.width
-        k = int(np.argmin(gap))
+        k = int(np.flatnonzero(inside)[np.argmin(gap[inside])])
         out.append(Demand("edge clearance", "m", float(gap[k]), float(s[k]), 0.0))
         grade = np.degrees(np.abs(np.asarray(track.grade(s_c), dtype=float)))
-        out.append(_largest("grade", "deg", grade, s, math.nan))
+        out.append(_largest("grade", "deg", grade, s, math.nan, inside))
     return out
 
 
