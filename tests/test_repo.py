@@ -91,8 +91,9 @@ def test_every_import_is_a_declared_dependency():
             elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
                 used.add(node.module.split(".")[0])
     third_party = used - set(sys.stdlib_module_names) - {"racing_lib"}
-    # the [distributed] extra, imported lazily; the [commonroad] extra (racing_lib.plants)
-    optional = {"dask", "distributed", "vehiclemodels"}
+    # the [distributed] extra, imported lazily; the [commonroad] extra (racing_lib.plants); the
+    # [gym] extra (racing_lib.envs)
+    optional = {"dask", "distributed", "vehiclemodels", "gymnasium"}
     missing = {u for u in third_party - optional if u.lower() not in declared}
     assert not missing, f"imported but not declared in pyproject.toml: {sorted(missing)}"
 

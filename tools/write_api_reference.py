@@ -29,6 +29,7 @@ SECTIONS = [
     ("Planning", ["racing_lib.planning"]),
     ("Control", ["racing_lib.control"]),
     ("Experiments: laps, identification, tuning, the paper's tables", ["racing_lib.experiments"]),
+    ("A Gymnasium environment", ["racing_lib.envs"]),
     ("Plots, notebooks and the command line", ["racing_lib.face"]),
     ("Exercise checks", ["racing_lib.grading"]),
     (
