@@ -10,7 +10,6 @@ exit status 2, never as a traceback.
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import sys
 from collections.abc import Sequence
@@ -25,7 +24,8 @@ from racing_lib.face.output_places import (
     check_output_file,
 )
 from racing_lib.face.tracks_command import add_tracks_parser
-from racing_lib.io import atomic_savefig, atomic_write_json, jsonable
+from racing_lib.face.tune_command import add_tune_parser, checkpoint_dir
+from racing_lib.io import atomic_savefig, atomic_write_json
 from racing_lib.model import CarModel, ModelOptions, identified_model
 from racing_lib.planning import METHODS, STARTS, TimeOptimalSettings, plan
 from racing_lib.plants import CARS
@@ -204,49 +204,6 @@ def _save_lap_outputs(out_dir: FilePath, track, trajectory, results, report) -> 
     atomic_write_json(out_dir / "summary.json", _clean(report))
 
 
-def cmd_tune(args: argparse.Namespace) -> int:
-    """Tune the coupled MPC's weights with CMA-ES on the time-optimal plan of a track."""
-    # Per command (see the note at the top): the experiments load the controllers (scipy.signal,
-    # OSQP), a third of a second.
-    from racing_lib.experiments.configs import config_spec
-    from racing_lib.experiments.tuning import tune_weights
-    from racing_lib.optim.cmaes import TuningSettings
-    from racing_lib.tracks import load_track
-
-    track = load_track(args.track)
-    _say(f"planning {track.name} time-optimally ...")
-    spec = config_spec("main", track)
-    out = FilePath(args.out)
-    work = _checkpoint_dir(out)
-    _say(f"tuning with CMA-ES: {args.budget} generations, {args.workers} workers; "
-         f"checkpoints in {work}/ (rerun the same command to resume)")  # fmt: skip
-    result = tune_weights(
-        spec,
-        seeds=(args.seed,),
-        settings=TuningSettings(max_generations=args.budget, seed=args.seed),
-        workers=args.workers,
-        out_dir=work,
-        resume=True,
-        progress=True,
-    )
-    atomic_write_json(
-        out,
-        jsonable(
-            {
-                "track": track.name,
-                "configuration": "main",
-                "best_objective": result.best_objective,
-                "generations": result.generations,
-                "evaluations": result.evaluations,
-                "weights": result.best_weights,
-            }
-        ),
-    )
-    _say(f"best objective {result.best_objective:.3f} after {result.evaluations} laps")
-    print(json.dumps(_clean(result.best_weights), indent=2))
-    return 0
-
-
 # --------------------------------------------------------------------------------------------------
 # ablation
 
@@ -300,7 +257,18 @@ def cmd_ablation(args: argparse.Namespace) -> int:
         "log": _say,
     }
     todo = [n for n in shown if n in recompute]
-    fresh = {r["name"]: r for r in ablation.run_ablation(todo, **common)} if todo else {}
+    client = None
+    if todo and args.scheduler:
+        from racing_lib.face.cluster import connect_scheduler
+
+        client = connect_scheduler(args.scheduler)
+        common["executor"] = client.get_executor()
+    try:
+        fresh = {r["name"]: r for r in ablation.run_ablation(todo, **common)} if todo else {}
+    finally:
+        if client is not None:
+            client.close()
+    common.pop("executor", None)
     if FilePath(common["out_dir"]).is_dir():
         # Rows recomputed by an earlier run with these settings count as recomputed too.
         rest = [n for n in shown if n not in fresh]
@@ -404,7 +372,8 @@ def check_arguments(args: argparse.Namespace) -> None:
     _at_least(getattr(args, "workers", None), 1, "--workers", " (1 runs the laps in-process)")
     _at_least(getattr(args, "max_iter", None), 1, "--max-iter")
     _at_least(getattr(args, "iterations", None), 0, "--iterations")
-    _at_least(getattr(args, "seeds", None), 1, "--seeds", " (laps per iteration)")
+    _at_least(getattr(args, "seeds", None), 1, "--seeds", " (a number of laps)")
+    _at_least(getattr(args, "popsize", None), 2, "--popsize", " (CMA-ES candidates per generation)")
     spacing = getattr(args, "spacing", None)
     if spacing is not None and not (math.isfinite(spacing) and 0.5 <= spacing <= 20.0):
         raise RacingLibError(
@@ -431,7 +400,7 @@ def check_arguments(args: argparse.Namespace) -> None:
         else:
             check_output_dir(out)
         if args.command == "tune":
-            check_output_dir(str(_checkpoint_dir(FilePath(out))), "--out (its checkpoints)")
+            check_output_dir(str(checkpoint_dir(FilePath(out))), "--out (its checkpoints)")
     plan_file = getattr(args, "plan", None)
     try:
         found = bool(plan_file) and FilePath(plan_file).is_file()
@@ -442,11 +411,6 @@ def check_arguments(args: argparse.Namespace) -> None:
             f"--plan {plan_file}: no such file (or not readable); make one with "
             f"`racing-lib plan --out {plan_file}`."
         )
-
-
-def _checkpoint_dir(out: FilePath) -> FilePath:
-    """Where ``tune --out FILE`` keeps its checkpoints: a folder beside FILE."""
-    return out.with_name(out.stem + "_checkpoints")
 
 
 # --------------------------------------------------------------------------------------------------
@@ -551,13 +515,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     p.set_defaults(func=cmd_lap)
 
-    p = sub.add_parser("tune", help="tune the coupled MPC's weights with CMA-ES")
-    _add_track(p)
-    p.add_argument("--budget", type=int, default=20, help="CMA-ES generations (default 20)")
-    p.add_argument("--workers", type=int, default=2, help="parallel lap processes (default 2)")
-    p.add_argument("--seed", type=int, default=0, help="seed of CMA-ES and of the laps")
-    p.add_argument("--out", default="tuned_weights.json", help="where to write the weights")
-    p.set_defaults(func=cmd_tune)
+    add_tune_parser(sub)
 
     add_learn_parser(sub, _add_track)
 
@@ -586,7 +544,14 @@ def build_parser() -> argparse.ArgumentParser:
         help="seeded trials per row (default 10; 2 in fast mode)",
     )
     p.add_argument("--seed", type=int, default=0, help="seed of the first trial (default 0)")
-    p.add_argument("--workers", type=int, default=2, help="parallel lap processes (default 2)")
+    runner = p.add_mutually_exclusive_group()
+    runner.add_argument(
+        "--workers", type=int, default=2, help="local lap processes for --recompute (default 2)"
+    )
+    runner.add_argument(
+        "--scheduler", metavar="ADDRESS",
+        help="recompute on a Dask cluster (dask scheduler / dask worker), e.g. tcp://host:8786",
+    )  # fmt: skip
     p.add_argument("--out", help="cache folder of rows and plans (default runs/ablation)")
     p.add_argument(
         "--spacing", type=float, help="plan node spacing in m (default: the planners' 3 m)"
