@@ -79,11 +79,16 @@ def circuit_row(path: Path, seeds: list[int], plans_dir: Path | None) -> dict:
     return drive_circuit(load_track(path), seeds, plans_dir)[0]
 
 
-def drive_circuit(track, seeds: list[int], plans_dir: Path | None) -> tuple[dict, object, object]:
-    """Plan and drive one circuit: the row of the table, the race result and the plan."""
+def drive_circuit(
+    track, seeds: list[int], plans_dir: Path | None, weights: str | dict = "tuned"
+) -> tuple[dict, object, object]:
+    """Plan and drive one circuit: the row of the table, the race result and the plan.
+
+    ``weights``: the MPC weights, as :func:`racing_lib.experiments.pipeline.race` takes them.
+    """
     reference, iterations, plan_wall = _reference(track, plans_dir)
     result = race(track, controller="coupled-mpc", reference=reference, seed=seeds[0],
-                  trials=len(seeds))  # fmt: skip
+                  trials=len(seeds), weights=weights)  # fmt: skip
     metrics = [lap.metrics for lap in result.laps]
     done = [m for m in metrics if m.completed]
     laps = np.array([m.lap_time_s for m in done]) if done else np.array([np.nan])

@@ -17,8 +17,10 @@ Usage::
     python benchmarks/bench_robustness.py --out runs/robustness --json > robustness.json
 
 Every finished circuit's row is kept in ``--out`` (``rows/<name>.json``, with its plan in
-``plans/``), so a stopped run resumes where it stopped. About 20-40 s per circuit and seed on two
-cores. Never run inside the tests: it is long, and its wall times depend on the machine.
+``plans/``), so a stopped run resumes where it stopped. ``--weights FILE`` drives other MPC
+weights (such as those ``racing-lib tune --tracks`` writes); give such a run its own ``--out``.
+About 2-5 s per circuit and seed on two cores (50 circuits, 2 seeds: 3-4 min). Never run inside
+the tests: its wall times depend on the machine.
 """
 
 from __future__ import annotations
@@ -130,6 +132,18 @@ def _failure_line(row: dict) -> str:
     )
 
 
+def _weights(path: Path) -> dict[str, float]:
+    """The weights of a ``racing-lib tune`` output file (its ``weights``), or the file's dict."""
+    try:
+        data = json.loads(path.read_text())
+    except (OSError, ValueError) as exc:
+        raise RacingLibError(f"--weights {path}: cannot read it as JSON ({exc}).") from None
+    found = data.get("weights", data) if isinstance(data, dict) else None
+    if not isinstance(found, dict) or not all(isinstance(v, float | int) for v in found.values()):
+        raise RacingLibError(f"--weights {path}: no weights dict in it (as tune writes it).")
+    return {k: float(v) for k, v in found.items()}
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argument_parser(__doc__)
     ap.add_argument("real", nargs="*", type=Path, help="folders of real circuits to add")
@@ -138,8 +152,14 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--grade", action="store_true", help="generated circuits with hills")
     ap.add_argument("--seeds", type=int, nargs="+", default=[0], help="lap seeds (0)")
     ap.add_argument("--out", type=Path, required=True, help="folder that keeps every result")
+    ap.add_argument(
+        "--weights", type=Path, default=None,
+        help="MPC weights: a JSON file as racing-lib tune writes it (default: the shipped set); "
+        "use its own --out, since rows kept there are reused",
+    )  # fmt: skip
     ap.add_argument("--json", action="store_true", help="print one JSON object")
     args = ap.parse_args(argv)
+    weights = "tuned" if args.weights is None else _weights(args.weights)
     if args.circuits < 0:
         raise RacingLibError(f"--circuits must be >= 0, got {args.circuits}.")
     files = circuit_files(args)
@@ -154,7 +174,7 @@ def main(argv: list[str] | None = None) -> int:
         t0 = time.perf_counter()
         try:
             track = load_track(path)
-            row, result, reference = drive_circuit(track, args.seeds, args.out / "plans")
+            row, result, reference = drive_circuit(track, args.seeds, args.out / "plans", weights)
         except RacingLibError as exc:
             print(f"{path.stem}: {exc}", file=sys.stderr)
             failed += 1

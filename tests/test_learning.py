@@ -230,7 +230,11 @@ def test_the_loop_keeps_and_resumes_its_iterations(tmp_path):
     assert json.loads(json.dumps(again.to_dict()))["best_possible_lap_s"] == pytest.approx(
         102.95, abs=0.01
     )
-    (tmp_path / "iteration_01" / "lap_00.npz").write_bytes(b"not a lap")
+    # A damaged lap that the loop learns from (iteration 0's laps, driven with the blanket
+    # margins, are clean) is refused when the run resumes.
+    kept = json.loads((tmp_path / "iteration_00" / "summary.json").read_text())["clean_logs"]
+    assert kept
+    (tmp_path / "iteration_00" / kept[0]).write_bytes(b"not a lap")
     with pytest.raises(ArgumentError, match="delete the folder"):
         learn("expressway", LearnSettings(iterations=1, seeds=1, inducing=10), out=tmp_path)
 

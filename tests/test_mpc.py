@@ -768,3 +768,20 @@ def test_the_controllers_linearization_matches_the_packed_call(circle_setup):
     A2, _, _ = ctrl.linearize(xi + 0.1, u, kappa, theta)
     assert not np.array_equal(A, A2)
     np.testing.assert_array_equal(A, A_p)  # the first result is a copy, not the reused buffer
+
+
+def test_the_brake_is_not_cut_by_a_yaw_wobble_the_line_does_not_need():
+    n = 6
+    xi_ref = np.zeros((n + 1, NX))
+    xi_ref[:, X.VX] = 40.0
+    xi_hat = xi_ref.copy()
+    xi_hat[:, X.R] = 0.3  # a wobble under braking on a straight: 12 m/s^2 of v_x r
+    reserved = CoupledMPC.reserved_lateral_acceleration(xi_hat, xi_ref)
+    assert reserved.shape == (n,) and np.all(reserved == 0.0)
+    # In a corner of the line (radius 200 m) the car needs v^2 / R; faster than the plan, more.
+    xi_ref[:, X.R] = 40.0 / 200.0
+    xi_hat[:, X.VX], xi_hat[:, X.R] = 44.0, 44.0 / 200.0
+    assert np.allclose(CoupledMPC.reserved_lateral_acceleration(xi_hat, xi_ref), 44.0**2 / 200.0)
+    # A car that turns less than the line (understeering) keeps what it uses.
+    xi_hat[:, X.R] = 0.1
+    assert np.allclose(CoupledMPC.reserved_lateral_acceleration(xi_hat, xi_ref), 4.4)

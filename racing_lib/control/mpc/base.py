@@ -347,12 +347,15 @@ class MPCBase:
             A, B, d = zero_order_hold(A, B, d, self.settings.dt)
         return A, B, d
 
-    def ax_limits(self, xi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def ax_limits(
+        self, xi: np.ndarray, a_y: np.ndarray | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
         """Bounds ``(a_min, a_max)`` on a_x (m/s^2) at states ``xi`` (N, 6).
 
         The pedal map's full-brake and full-throttle values, the optional floor, and the friction
-        left over by the lateral acceleration ``v_x r`` (see :class:`MPCSettings`). The interval
-        always contains a_x = 0 when the pedal map allows it, and is never empty.
+        left over by the lateral acceleration ``a_y`` (m/s^2; default ``v_x r`` of ``xi``; see
+        :class:`MPCSettings`). The interval always contains a_x = 0 when the pedal map allows it,
+        and is never empty.
         """
         st = self.settings
         a_min, a_max = self.pedal_map.limits(xi)
@@ -361,7 +364,8 @@ class MPCBase:
             p = self.params
             a_tot = st.friction_scale * p.peak_acceleration()
             a_long = min(a_tot, st.friction_scale * self.pedal_map.full_brake())
-            a_y = xi[:, X.VX] * xi[:, X.R]
+            if a_y is None:
+                a_y = xi[:, X.VX] * xi[:, X.R]
             # The g-g ellipse (as in the planner); keep a tenth of a_x's axis even when the
             # lateral demand exceeds the limit.
             room = a_long * np.sqrt(np.maximum(1.0 - (a_y / a_tot) ** 2, 0.01))

@@ -124,6 +124,25 @@ class CoupledMPC(MPCBase):
         """
         return xi_ref + self._lam_used[:, None] * (xi0 - xi_ref[0])[None, :]
 
+    @staticmethod
+    def reserved_lateral_acceleration(xi_hat: np.ndarray, xi_ref: np.ndarray) -> np.ndarray:
+        """The lateral acceleration the a_x bounds' friction ellipse reserves, m/s^2, (N,).
+
+        At stages 0..N-1, the smaller of two magnitudes: the one the car is expected to have,
+        ``v_x r`` of the heuristic trajectory, and the one the plan's line asks for at the
+        heuristic speed, ``v_x^2 r_ref / v_ref`` (its curvature ``r_ref / v_ref``). The first
+        alone closed the ellipse on a yaw wobble under hard braking that the line does not need
+        (0.3 rad/s at 40 m/s is 12 m/s^2, the whole ellipse): the brake was cut for a period,
+        again and again, and the car reached a hairpin several m/s too fast and ran wide (three
+        of fifty generated circuits, ``benchmarks/bench_robustness.py``). The second alone keeps
+        grip for a line the car is not on.
+        """
+        n = xi_hat.shape[0] - 1
+        v_ref = np.maximum(xi_ref[:n, X.VX], 1.0)
+        on_line = xi_hat[:n, X.VX] ** 2 * xi_ref[:n, X.R] / v_ref
+        expected = xi_hat[:n, X.VX] * xi_hat[:n, X.R]
+        return np.minimum(np.abs(on_line), np.abs(expected))
+
     def step(self, obs: Observation) -> Command:
         """One control period: project, build the QP along the heuristic trajectory, solve."""
         st = self.settings
@@ -140,7 +159,8 @@ class CoupledMPC(MPCBase):
         kappa = rows[:N, PlanTable.KAPPA]
         theta = rows[:N, PlanTable.THETA]
         # State-dependent a_x limits at the heuristic states, stages 0..N-1.
-        a_min, a_max = self.ax_limits(xi_hat[:N])
+        a_y = self.reserved_lateral_acceleration(xi_hat, xi_ref)
+        a_min, a_max = self.ax_limits(xi_hat[:N], a_y)
         u_min, u_max = np.empty((N, NU)), np.empty((N, NU))
         u_min[:, U.DELTA], u_min[:, U.AX] = -self.model.steer_max, a_min
         u_max[:, U.DELTA], u_max[:, U.AX] = self.model.steer_max, a_max

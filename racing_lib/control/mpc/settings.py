@@ -97,8 +97,11 @@ class MPCSettings:
         says 12.2, and a controller that believes the map brakes too late.
     friction_ellipse : bool
         Bound a_x also by the friction left over from cornering, the planner's g-g ellipse:
-        ``|a_x| <= a_brake sqrt(1 - (a_y / a_peak)^2)`` with ``a_y = v_x r`` of the heuristic
-        trajectory, ``a_peak = friction_scale mu D g`` (``D`` the smaller Pacejka peak factor)
+        ``|a_x| <= a_brake sqrt(1 - (a_y / a_peak)^2)`` with ``a_y`` the lateral acceleration
+        reserved for cornering: ``v_x r`` of the states the QP is built at (for the coupled
+        MPC, the smaller of that and what the plan's line needs at that speed:
+        :meth:`~racing_lib.control.mpc.coupled.CoupledMPC.reserved_lateral_acceleration`),
+        ``a_peak = friction_scale mu D g`` (``D`` the smaller Pacejka peak factor)
         and ``a_brake`` the pedal map's full brake (scaled alike, at most ``a_peak``). The
         model's tyres do not know that braking costs lateral grip; the car's do, and a
         controller that brakes fully into a hairpin (as the plan may ask when the car arrives
