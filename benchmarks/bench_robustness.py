@@ -3,7 +3,7 @@
 Generates ``--circuits N`` circuits (50 by default) with :func:`racing_lib.tracks.generate`,
 seeds S, S+1, ..., adds every racetrack-database CSV of the folders given, and on each one runs
 the main job: the time-optimal plan driven by the coupled MPC with the shipped tuned weights, over
-``--seeds`` laps. It prints one row per circuit (as ``bench_circuits.py`` does), then the
+``--laps`` seeded laps. It prints one row per circuit (as ``bench_circuits.py`` does), then the
 distribution over circuits (gap to the plan, wall contacts, time off track, QP failures), and for
 every circuit that failed, where and why: the point of the lap where the car went furthest over
 an edge, how far, and what the plan asks of the car on the 150 m before it
@@ -15,9 +15,11 @@ Usage::
     python benchmarks/bench_robustness.py --circuits 10 --seed 100 --out runs/r10
     python benchmarks/bench_robustness.py --circuits 0 --out runs/real my_tracks/  # real ones only
     python benchmarks/bench_robustness.py --out runs/robustness --json > robustness.json
+    python benchmarks/bench_robustness.py --laps 3 --lap-seed 10 --out runs/r3   # other laps
 
 Every finished circuit's row is kept in ``--out`` (``rows/<name>.json``, with its plan in
-``plans/``), so a stopped run resumes where it stopped. ``--weights FILE`` drives other MPC
+``plans/``), so a stopped run resumes where it stopped; ``run.json`` records what the run is, and a
+folder of another run is refused. ``--weights FILE`` drives other MPC
 weights (such as those ``racing-lib tune --tracks`` writes); give such a run its own ``--out``.
 About 2-5 s per circuit and seed on two cores (50 circuits, 2 seeds: 3-4 min). Never run inside
 the tests: its wall times depend on the machine.
@@ -100,13 +102,43 @@ def circuit_files(args) -> list[Path]:
     return files
 
 
+def _incomplete(row: dict) -> bool:
+    """Whether a lap of the circuit was not completed (``completed`` reads "done/driven")."""
+    done, driven = row["completed"].split("/")
+    return done != driven
+
+
+def _same_run(args, seeds: list[int], weights) -> None:
+    """Record what --out holds (OUT/run.json), or refuse a folder of another run.
+
+    Its rows are reused, so they must come from the same circuits, laps and weights.
+    """
+    run = {
+        "circuits": args.circuits,
+        "seed": args.seed,
+        "grade": args.grade,
+        "real": sorted(str(Path(f).resolve()) for f in args.real),
+        "seeds": seeds,
+        "weights": weights,
+    }
+    marker = args.out / "run.json"
+    if marker.is_file():
+        if json.loads(marker.read_text()) != json.loads(json.dumps(run)):
+            raise RacingLibError(
+                f"{args.out} holds rows of another run (other circuits, laps or weights; see "
+                f"{marker}); give another --out, or delete that folder."
+            )
+        return
+    atomic_write_json(marker, jsonable(run))
+
+
 def distribution(rows: list[dict], failed: int) -> str:
     """The spread of the results over circuits, in a few lines."""
     gaps = np.array([r["gap_pct"] for r in rows if math.isfinite(r["gap_pct"])])
     q = np.percentile(gaps, [0, 10, 50, 90, 100]) if gaps.size else [math.nan] * 5
     walls = sum(r["walls"] > 0 for r in rows)
     off = sum(r["offtrack_s"] > 0 for r in rows)
-    incomplete = sum(not r["completed"].startswith(r["completed"].split("/")[1]) for r in rows)
+    incomplete = sum(_incomplete(r) for r in rows)
     qp = sum(r["qp_fail_per_lap"] > 1.0 for r in rows)
     return "\n".join(
         [
@@ -116,7 +148,8 @@ def distribution(rows: list[dict], failed: int) -> str:
             f"circuits with wall contacts: {walls}; off track: {off}; a lap not completed: "
             f"{incomplete}; more than one QP failure per lap: {qp}",
             f"clean (no contact, 0 s off, every lap completed): "
-            f"{sum(r['walls'] == 0 and r['offtrack_s'] == 0 for r in rows)} of {len(rows)}",
+            f"{sum(r['walls'] == 0 and r['offtrack_s'] == 0 and not _incomplete(r) for r in rows)}"
+            f" of {len(rows)}",
         ]
     )
 
@@ -150,7 +183,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--circuits", type=int, default=50, help="generated circuits (50)")
     ap.add_argument("--seed", type=int, default=0, help="seed of the first circuit (0)")
     ap.add_argument("--grade", action="store_true", help="generated circuits with hills")
-    ap.add_argument("--seeds", type=int, nargs="+", default=[0], help="lap seeds (0)")
+    ap.add_argument("--laps", type=int, default=2, help="seeded laps per circuit (2)")
+    ap.add_argument("--lap-seed", type=int, default=0, help="seed of the first lap (0)")
     ap.add_argument("--out", type=Path, required=True, help="folder that keeps every result")
     ap.add_argument(
         "--weights", type=Path, default=None,
@@ -160,8 +194,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--json", action="store_true", help="print one JSON object")
     args = ap.parse_args(argv)
     weights = "tuned" if args.weights is None else _weights(args.weights)
-    if args.circuits < 0:
-        raise RacingLibError(f"--circuits must be >= 0, got {args.circuits}.")
+    if args.circuits < 0 or args.laps < 1 or args.lap_seed < 0:
+        raise RacingLibError("--circuits must be >= 0, --laps >= 1 and --lap-seed >= 0.")
+    seeds = list(range(args.lap_seed, args.lap_seed + args.laps))
+    _same_run(args, seeds, weights)
     files = circuit_files(args)
     if not files:
         raise RacingLibError("no circuits: give --circuits N > 0 or a folder of real ones.")
@@ -174,7 +210,7 @@ def main(argv: list[str] | None = None) -> int:
         t0 = time.perf_counter()
         try:
             track = load_track(path)
-            row, result, reference = drive_circuit(track, args.seeds, args.out / "plans", weights)
+            row, result, reference = drive_circuit(track, seeds, args.out / "plans", weights)
         except RacingLibError as exc:
             print(f"{path.stem}: {exc}", file=sys.stderr)
             failed += 1

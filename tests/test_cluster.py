@@ -114,3 +114,27 @@ def test_an_unreachable_scheduler_is_refused_before_any_work(tmp_path, capsys):
 def test_a_folder_without_circuits_is_refused(tmp_path, capsys):
     assert main(["tune", "--tracks", str(tmp_path), "--out", str(tmp_path / "w.json")]) == 2
     assert "no track CSV files" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("address", ["", "foo", "tcp://127.0.0.1:notaport"])
+def test_a_malformed_address_is_refused_at_once(tmp_path, capsys, address):
+    out = tmp_path / "w.json"
+    assert main(["tune", "--scheduler", address, "--out", str(out)]) == 2
+    assert "is not a scheduler address" in capsys.readouterr().err
+    assert not out.exists() and not (tmp_path / "w_checkpoints").exists()
+
+
+def test_ablation_refuses_a_scheduler_with_nothing_to_recompute(capsys):
+    assert main(["ablation", "--scheduler", "tcp://127.0.0.1:8786"]) == 2
+    assert "without --recompute" in capsys.readouterr().err
+
+
+def test_checkpoints_of_other_circuits_or_seeds_are_not_resumed(circuits, tmp_path, capsys):
+    out = tmp_path / "w.json"
+    argv = ["tune", "--budget", "1", "--popsize", "2", "--workers", "1", "--out", str(out)]
+    assert main([*argv, "--tracks", str(circuits / "short-1.csv")]) == 0
+    for other in (["--tracks", str(circuits)], ["--tracks", str(circuits / "short-1.csv"),
+                                                 "--seeds", "2"]):  # fmt: skip
+        capsys.readouterr()
+        assert main([*argv, *other]) == 2
+        assert "tune other circuits or seeds" in capsys.readouterr().err

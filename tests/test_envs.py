@@ -49,9 +49,14 @@ def test_made_by_id_in_a_fresh_interpreter_and_declared_as_an_entry_point():
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.split() == ["(30,)", ENV_ID]
-    # Gymnasium versions with a plugin loader call this entry point of the installed package.
+    # Gymnasium versions with a plugin loader (before 1.0) call this entry point of the installed
+    # package when they are imported, so there the id alone is enough.
     (point,) = [e for e in entry_points(group="gymnasium.envs") if e.name == "racing_lib"]
     assert point.load() is racing_lib.envs.register_envs
+    if int(gymnasium.__version__.split(".")[0]) < 1:
+        plain = code.replace("racing_lib.envs:racing_lib/", "racing_lib/")
+        out = subprocess.run([sys.executable, "-c", plain], capture_output=True, text=True)
+        assert out.stdout.split() == ["(30,)", ENV_ID], out.stderr
 
 
 def test_the_observation_is_the_documented_state():
@@ -115,6 +120,8 @@ def test_the_time_limit_truncates():
             break
     assert truncated and not terminated and info["end"] == "time limit"
     assert info["time_s"] == pytest.approx(3.0, abs=0.11)
+    with pytest.raises(ArgumentError, match="the episode has ended"):
+        env.step(np.zeros(2, dtype=np.float32))
 
 
 def test_generated_circuits_follow_the_episode_seed():
@@ -146,7 +153,8 @@ def test_works_in_vector_environments(vector):
 def test_a_foreign_car_drives_in_the_environment():
     pytest.importorskip("vehiclemodels")
     env = gymnasium.make(ENV_ID, track="shortcut", plant="commonroad:vehicle2")
-    env.reset(seed=0)
+    _, info = env.reset(seed=0)
+    assert info["steer_max"] > 1.0  # the BMW's own steering limit (rad), not the simulated car's
     total = sum(env.step(np.array([0.0, 0.3], dtype=np.float32))[1] for _ in range(20))
     assert 40.0 < total < 120.0  # 2 s at about 30 m/s
 
@@ -160,6 +168,15 @@ def test_a_foreign_car_drives_in_the_environment():
         ({"time_limit_s": -1.0}, "time_limit_s"),
         ({"track": "nowhere"}, "Unknown track"),
         ({"track": "generated", "circuits": CircuitSpec(length=(10.0, 20.0))}, "length range"),
+        ({"track": "generated", "circuits": {"length": (2000, 3000)}}, "CircuitSpec"),
+        ({"track": "shortcut", "circuits": CircuitSpec()}, "track='generated'"),
+        ({"track": 3}, "track must be"),
+        ({"start_speed": "30"}, "start_speed must be a number"),
+        ({"steer_max": -0.5}, "steer_max must be a number > 0"),
+        ({"time_limit_s": float("nan")}, "time_limit_s"),
+        ({"lookahead": [10.0, -5.0]}, "lookahead"),
+        ({"lookahead": "far"}, "lookahead"),
+        ({"render_mode": "human"}, "does not render"),
     ],
 )
 def test_bad_arguments_get_one_clear_error(kwargs, words):

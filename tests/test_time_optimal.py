@@ -243,6 +243,8 @@ def test_demands_of_one_stretch_of_the_plan(oval, nlp):
     for d in wrapped:
         assert d.s <= 40.0 or d.s >= plan_.length - 40.0
         assert d.peak <= whole[d.name].peak
+    lap = plan_demands(plan_, PARAMS, where=(100.0, 100.0 + plan_.length))  # a whole lap
+    assert [d.peak for d in lap] == [d.peak for d in whole.values()]
     with pytest.raises(PlanningError, match="no plan node"):
         plan_demands(plan_, PARAMS, where=(10.0, 10.1))
 

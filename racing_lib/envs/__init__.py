@@ -31,14 +31,16 @@ def register_envs() -> None:
         Gymnasium is not installed (the message gives the pip command).
     """
     try:
-        import gymnasium
+        # From the registration module, not the package: Gymnasium versions with a plugin loader
+        # call this function while the package itself is still being imported.
+        from gymnasium.envs.registration import register, registry
     except ImportError:
         raise PlantError(
             "the Gymnasium environment needs the gymnasium package: "
             'pip install "racing-lib[gym]" (or pip install "gymnasium>=1.0").'
         ) from None
-    if ENV_ID not in gymnasium.registry:
-        gymnasium.register(id=ENV_ID, entry_point="racing_lib.envs.time_trial:TimeTrialEnv")
+    if ENV_ID not in registry:
+        register(id=ENV_ID, entry_point="racing_lib.envs.time_trial:TimeTrialEnv")
 
 
 register_envs()

@@ -11,7 +11,8 @@ index  what
 ====== ==========================================================================
 0-2    v_x, v_y (m/s, body frame), yaw rate r (rad/s)
 3-4    heading error e_psi (rad) and lateral offset e_y (m, > 0 left) on the centerline
-5      progress: the share of the lap driven, in [0, 1]
+5      progress: the share of the lap driven (0 at the start, 1 at the line; below 0 when
+       the car drives backwards)
 6-7    room to the left and to the right edge from the car's centre, m
 8-9    the previous action (normalised steering, pedal)
 10-    curvature of the centerline ahead (1/m, > 0 left) at ``lookahead`` distances (m)
@@ -29,13 +30,15 @@ Termination: the lap is complete (``info["lap_time_s"]``), the car touched a wal
 the road, or it spun (heading more than 90 degrees off the centerline). Truncation: the time limit
 (default: long enough for a lap at 5 m/s). ``info["end"]`` says which.
 
-``info["observation"]`` holds the plant's own :class:`~racing_lib.interfaces.Observation`, so that
+Stepping after the episode ended is refused: call ``reset()``. ``info["observation"]`` holds the
+plant's own :class:`~racing_lib.interfaces.Observation`, so that
 the library's controllers, which work in the plane, can act: see :class:`MPCPolicy`.
 """
 
 from __future__ import annotations
 
 import math
+import os
 from collections.abc import Callable, Sequence
 from typing import Any
 
@@ -77,7 +80,8 @@ class TimeTrialEnv(gymnasium.Env):
         car at the start line heading along the track (like
         :class:`racing_lib.plants.commonroad.CommonRoadAt`).
     steer_max : float, optional
-        The steering angle an action of 1 asks for, rad (default: the car's own limit).
+        The steering angle an action of 1 asks for, rad (default: a named car's own limit, and
+        the simulated car's 0.5 rad for a factory). It is in every ``info`` as ``steer_max``.
     start_speed : float
         Speed at the start, m/s. (The MPC of :class:`MPCPolicy` tracks a plan made for flying
         laps; from 30 m/s it drives every track of the tests, from 10 m/s it can lose the car.)
@@ -101,24 +105,47 @@ class TimeTrialEnv(gymnasium.Env):
         time_limit_s: float | None = None,
         lookahead: Sequence[float] = LOOKAHEAD,
         circuits: CircuitSpec | None = None,
+        render_mode: str | None = None,
     ) -> None:
+        if render_mode is not None:
+            raise ArgumentError(
+                f"render_mode={render_mode!r}: this environment does not render; draw a lap from "
+                "info['observation'] with racing_lib.face.plotting."
+            )
+        self.render_mode = None
         self._make_plant, car_steer_max = _plant_factory(plant)
-        self.steer_max = float(steer_max if steer_max is not None else car_steer_max)
-        if not (math.isfinite(start_speed) and 0.0 < start_speed < 80.0):
-            raise ArgumentError(f"start_speed must be in (0, 80) m/s, got {start_speed}.")
-        if time_limit_s is not None and not (math.isfinite(time_limit_s) and time_limit_s > 0):
-            raise ArgumentError(f"time_limit_s must be > 0 s, got {time_limit_s}.")
-        self.lookahead = np.asarray(lookahead, dtype=float)
-        if self.lookahead.ndim != 1 or not np.all(np.isfinite(self.lookahead)):
-            raise ArgumentError("lookahead must be a list of finite distances, m.")
-        self.start_speed = float(start_speed)
-        self._time_limit = time_limit_s
+        self.steer_max = _positive("steer_max", car_steer_max if steer_max is None else steer_max)
+        self.start_speed = _positive("start_speed", start_speed, below=80.0)
+        self._time_limit = None if time_limit_s is None else _positive("time_limit_s", time_limit_s)
+        try:
+            self.lookahead = np.asarray(lookahead, dtype=float)
+        except (TypeError, ValueError):
+            self.lookahead = np.full(1, np.nan)
+        if not (self.lookahead.ndim == 1 and np.all(np.isfinite(self.lookahead))
+                and np.all(self.lookahead >= 0.0)):  # fmt: skip
+            raise ArgumentError(
+                f"lookahead must be a list of distances ahead >= 0 m, got {lookahead!r}."
+            )
         self._generated = isinstance(track, str) and track == "generated"
+        if circuits is not None and not self._generated:
+            raise ArgumentError(
+                "circuits= says what track='generated' draws; with a fixed track it would be "
+                "ignored: pass track='generated', or drop circuits."
+            )
+        if circuits is not None and not isinstance(circuits, CircuitSpec):
+            raise ArgumentError(
+                f"circuits must be a racing_lib.tracks.CircuitSpec, got {type(circuits).__name__}."
+            )
         self._circuits = circuits if circuits is not None else CircuitSpec()
         if self._generated:
             self._circuits.check()
             self.track: Track | None = None
         else:
+            if not isinstance(track, (str, os.PathLike, Track)):
+                raise ArgumentError(
+                    "track must be a track name, a CSV file, a Track or 'generated', got "
+                    f"{type(track).__name__}."
+                )
             self.track = track if isinstance(track, Track) else load_track(track)
         high = np.concatenate([_HIGH, np.ones(self.lookahead.size)]).astype(np.float32)
         self.observation_space = spaces.Box(-high, high, dtype=np.float32)
@@ -141,7 +168,6 @@ class TimeTrialEnv(gymnasium.Env):
             self._tracker = FrenetTracker(self.track.centerline)
         obs = self._plant.reset(seed=int(self.np_random.integers(2**31 - 1)))
         self._tracker.reset()
-        self._s, _ = self._tracker.project(obs.x, obs.y)
         self._driven = 0.0
         self._t0 = obs.t
         self._last_action = np.zeros(2)
@@ -149,13 +175,17 @@ class TimeTrialEnv(gymnasium.Env):
         self._limit = (
             self._time_limit if self._time_limit is not None else self.track.length / 5.0 + 30.0
         )
-        self._obs = obs
+        self._ended = False
+        self._where = self._frenet(obs)
         return self._observe(obs), self._info(obs, end=None)
 
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         """Send one command for one control period of the car (the plant's ``dt``)."""
-        if self._plant is None:
-            raise ArgumentError("call reset() before step().")
+        if self._plant is None or self._ended:
+            raise ArgumentError(
+                "call reset() first: " + ("no episode has started." if self._plant is None
+                                          else "the episode has ended.")
+            )  # fmt: skip
         try:
             a = np.asarray(action, dtype=float).reshape(-1)
         except (TypeError, ValueError):
@@ -167,13 +197,13 @@ class TimeTrialEnv(gymnasium.Env):
         a = np.clip(a, -1.0, 1.0)
         obs = self._plant.step(float(a[0]) * self.steer_max, float(a[1]))
         self._last_action = a
-        s, _ = self._tracker.project(obs.x, obs.y)
+        s_before = self._where[0]
+        self._where = self._frenet(obs)
         length = self.track.length
-        progress = (s - self._s + 0.5 * length) % length - 0.5 * length
-        self._s = s
+        progress = (self._where[0] - s_before + 0.5 * length) % length - 0.5 * length
         self._driven += progress
-        self._obs = obs
         end = self._end(obs)
+        self._ended = end is not None
         info = self._info(obs, end)
         if end == "lap":
             info["lap_time_s"] = float(obs.t - self._t0)
@@ -188,13 +218,15 @@ class TimeTrialEnv(gymnasium.Env):
 
     # ----------------------------------------------------------------------------------------
     def _frenet(self, obs: Observation) -> tuple[float, float, float]:
-        """Arc length (m), lateral offset (m) and heading error (rad) on the centerline."""
+        """Arc length (m), lateral offset (m) and heading error (rad) on the centerline.
+
+        One projection per step: every later use reads ``self._where``.
+        """
         s, e_y = self._tracker.project(obs.x, obs.y)
-        heading = float(np.asarray(self.track.centerline.heading(s)))
-        return s, e_y, float(wrap_angle(obs.psi - heading))
+        return s, e_y, float(wrap_angle(obs.psi - self._tracker.heading))
 
     def _observe(self, obs: Observation) -> np.ndarray:
-        s, e_y, e_psi = self._frenet(obs)
+        s, e_y, e_psi = self._where
         line = self.track
         ahead = (s + self.lookahead) % line.length
         room_left = float(line.width_left(s)) - e_y
@@ -210,7 +242,7 @@ class TimeTrialEnv(gymnasium.Env):
             return "lap"
         if int(getattr(self._plant, "wall_contacts", 0)) > self._walls:
             return "wall"
-        s, e_y, e_psi = self._frenet(obs)
+        s, e_y, e_psi = self._where
         if e_y > float(self.track.width_left(s)) or -e_y > float(self.track.width_right(s)):
             return "off track"
         if abs(e_psi) > _SPIN:
@@ -224,9 +256,19 @@ class TimeTrialEnv(gymnasium.Env):
             "observation": obs,
             "track": self.track.name,
             "driven_m": float(self._driven),
+            "steer_max": self.steer_max,
             "time_s": float(obs.t - self._t0),
             "end": end,
         }
+
+
+def _positive(name: str, value: Any, below: float = math.inf) -> float:
+    """``value`` as a float in (0, below), or one ArgumentError naming ``name``."""
+    ok = isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool)
+    if not (ok and math.isfinite(value) and 0.0 < value < below):
+        span = "> 0" if below == math.inf else f"in (0, {below:g})"
+        raise ArgumentError(f"{name} must be a number {span}, got {value!r}.")
+    return float(value)
 
 
 def _plant_factory(plant: Any) -> tuple[Callable[[Track, float], Plant], float]:
@@ -271,10 +313,14 @@ class MPCPolicy:
         self.weights = weights if weights is not None else tuned_weights()
         self._plans: dict[str, Any] = {}
         self._controller: Any = None
-        self._steer_max = VehicleParams().steer_max
+        self._steer_max = math.nan
 
-    def reset(self, track: Track, info: dict[str, Any], steer_max: float | None = None) -> None:
-        """Plan ``track`` (once per circuit) and start the MPC from the episode's first state."""
+    def reset(self, track: Track, info: dict[str, Any]) -> None:
+        """Plan ``track`` (once per circuit) and start the MPC from the episode's first state.
+
+        ``info`` is the one ``env.reset`` returned: its ``observation`` starts the MPC, and its
+        ``steer_max`` (rad) turns the MPC's steering angle into the environment's action.
+        """
         from racing_lib.control import build_controller
         from racing_lib.planning import plan
 
@@ -285,8 +331,7 @@ class MPCPolicy:
             "coupled-mpc", self._plans[key], track=track, weights=self.weights
         )
         self._controller.reset(info["observation"])
-        if steer_max is not None:
-            self._steer_max = float(steer_max)
+        self._steer_max = float(info["steer_max"])
 
     def __call__(self, observation: np.ndarray, info: dict[str, Any]) -> np.ndarray:
         """The action for the state in ``info["observation"]`` (normalised steering, pedal)."""

@@ -258,7 +258,7 @@ def cmd_ablation(args: argparse.Namespace) -> int:
     }
     todo = [n for n in shown if n in recompute]
     client = None
-    if todo and args.scheduler:
+    if todo and args.scheduler is not None:
         from racing_lib.face.cluster import connect_scheduler
 
         client = connect_scheduler(args.scheduler)
@@ -386,6 +386,11 @@ def check_arguments(args: argparse.Namespace) -> None:
         raise RacingLibError(
             "--spacing, --start and --max-iter are planner settings, but --plan drives a plan "
             "made before; give them to `racing-lib plan`, or drop --plan to plan here."
+        )
+    if args.command == "ablation" and args.scheduler is not None and not args.recompute:
+        raise RacingLibError(
+            "--scheduler runs recomputed rows on a cluster; without --recompute ROWS there is "
+            "nothing to run: add --recompute, or drop --scheduler."
         )
     out = getattr(args, "out", None)
     if args.command == "ablation" and getattr(args, "recompute", None) and not out:

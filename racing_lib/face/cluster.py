@@ -39,9 +39,20 @@ def connect_scheduler(address: str, timeout_s: float = 10.0) -> Any:
             '--scheduler needs Dask distributed: pip install "racing-lib[distributed]" (or '
             "drop --scheduler to run the laps in local processes)."
         ) from None
+    if not (isinstance(address, str) and "://" in address or ":" in str(address)):
+        raise RacingLibError(
+            f"--scheduler {address!r} is not a scheduler address; give one like "
+            "tcp://10.0.0.5:8786 (what `dask scheduler` prints), or drop --scheduler to run "
+            "locally."
+        )
     try:
         client = Client(address, timeout=timeout_s)
-    except (OSError, TimeoutError, ValueError, TypeError) as exc:
+    except (ValueError, TypeError) as exc:
+        raise RacingLibError(
+            f"--scheduler {address!r} is not a scheduler address ({exc}); give one like "
+            "tcp://10.0.0.5:8786 (what `dask scheduler` prints)."
+        ) from None
+    except (OSError, TimeoutError) as exc:
         raise RacingLibError(
             f"--scheduler {address}: no Dask scheduler answered within {timeout_s:g} s "
             f"({type(exc).__name__}). Start one with `dask scheduler` and workers with "

@@ -34,7 +34,7 @@ def tune_tracks(names: list[str]) -> list[Any]:
     """
     from racing_lib.tracks import load_track
 
-    tracks = []
+    sources: list[str] = []
     for name in names:
         folder = FilePath(name)
         if folder.is_dir():
@@ -45,18 +45,47 @@ def tune_tracks(names: list[str]) -> list[Any]:
                     "of racetrack-database files, or make some with `racing-lib tracks "
                     f"--generate 20 --out {name}`."
                 )
-            tracks += [load_track(f) for f in files]
+            sources += [str(f) for f in files]
         else:
-            tracks.append(load_track(name))
+            sources.append(name)
+    tracks = []
     seen: dict[str, str] = {}
-    for track in tracks:
+    for source in sources:
+        track = load_track(source)
         key = track.checksum()
         if key in seen:
             raise RacingLibError(
-                f"--tracks: circuit {track.name!r} is the same as {seen[key]!r}; give each once."
+                f"--tracks: {source} is the same circuit as {seen[key]}; give each circuit once."
             )
-        seen[key] = track.name
+        seen[key] = source
+        tracks.append(track)
     return tracks
+
+
+def _same_problem(work: FilePath, tracks: list[Any], seeds: tuple[int, ...]) -> None:
+    """Record what the checkpoints in ``work`` tune, or refuse checkpoints of another problem.
+
+    CMA-ES's own checkpoint knows its search space, not the laps that score a candidate: resumed
+    on other circuits or seeds, it would carry over a best candidate scored on something else.
+    """
+    problem = {
+        "configuration": "main",
+        "tracks": [[t.name, t.checksum()] for t in tracks],
+        "seeds": list(seeds),
+    }
+    marker = work / "problem.json"
+    if marker.is_file():
+        try:
+            kept = json.loads(marker.read_text(encoding="utf-8"))
+        except (OSError, ValueError):
+            kept = None
+        if kept != problem:
+            raise RacingLibError(
+                f"the checkpoints in {work}/ tune other circuits or seeds than these; give "
+                "another --out, or delete that folder to start this tuning afresh."
+            )
+        return
+    atomic_write_json(marker, problem)
 
 
 def cmd_tune(args: argparse.Namespace) -> int:
@@ -69,8 +98,10 @@ def cmd_tune(args: argparse.Namespace) -> int:
 
     tracks = tune_tracks(args.tracks or [args.track])
     seeds = tuple(range(args.seed, args.seed + args.seeds))
+    out = FilePath(args.out)
+    work = checkpoint_dir(out)
     client = None
-    if args.scheduler:
+    if args.scheduler is not None:
         from racing_lib.face.cluster import connect_scheduler
 
         client = connect_scheduler(args.scheduler)
@@ -78,12 +109,11 @@ def cmd_tune(args: argparse.Namespace) -> int:
     else:
         where = f"{args.workers} local processes"
     try:
+        _same_problem(work, tracks, seeds)
         specs = []
         for track in tracks:
             _say(f"planning {track.name} time-optimally ...")
             specs.append(config_spec("main", track))
-        out = FilePath(args.out)
-        work = checkpoint_dir(out)
         settings = TuningSettings(max_generations=args.budget, seed=args.seed, popsize=args.popsize)
         laps = len(specs) * len(seeds)
         _say(f"tuning with CMA-ES on {where}: {args.budget} generations; each candidate drives "

@@ -82,7 +82,7 @@ def _largest(
 
 def _inside(s: np.ndarray, length: float, where: tuple[float, float] | None) -> np.ndarray:
     """The nodes in the stretch ``where`` = (start, end) of the lap, m (it may wrap past 0)."""
-    if where is None:
+    if where is None or float(where[1]) - float(where[0]) >= length:
         return np.ones(s.shape, dtype=bool)
     start, end = (float(v) % length for v in where)
     inside = (s >= start) & (s <= end) if start <= end else (s >= start) | (s <= end)

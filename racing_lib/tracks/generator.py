@@ -18,7 +18,8 @@ same random stream, so a seed always gives the same circuit.
 
 Widths vary slowly along the lap inside the given range; with ``grade=True`` the road rises and
 falls as a sum of three periodic waves, scaled so that no slope exceeds ``max_grade``.
-Taught in notebook 00 (making a track); used by ``racing-lib tracks --generate``.
+Taught in chapter 08 (your own circuit); used by ``racing-lib tracks --generate``, the robustness
+benchmark and the Gymnasium environment's ``track="generated"``.
 """
 
 from __future__ import annotations
@@ -77,6 +78,19 @@ class CircuitSpec:
         TrackError
             Naming the value and the range that works.
         """
+        for name in ("length", "width"):
+            pair = getattr(self, name)
+            try:
+                ok = len(pair) == 2 and all(_is_number(v) for v in pair)
+            except TypeError:
+                ok = False
+            if not ok:
+                raise TrackError(
+                    f"Circuit {name} must be a (min, max) pair of numbers, got {pair!r}."
+                )
+        for name in ("min_radius", "max_grade"):
+            if not _is_number(getattr(self, name)):
+                raise TrackError(f"{name} must be a number, got {getattr(self, name)!r}.")
         lo, hi = (float(v) for v in self.length)
         if not (math.isfinite(lo) and math.isfinite(hi) and 500.0 <= lo <= hi <= 50_000.0):
             raise TrackError(
@@ -103,6 +117,11 @@ class CircuitSpec:
             raise TrackError(f"max_grade must be in (0, 0.25], got {self.max_grade}.")
         if self.boundary not in ("walls", "open"):
             raise TrackError(f"boundary must be 'walls' or 'open', got {self.boundary!r}.")
+
+
+def _is_number(value: object) -> bool:
+    """A real number (not a bool, not a string)."""
+    return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool)
 
 
 def generate(seed: int, spec: CircuitSpec | None = None, *, name: str | None = None) -> Track:
@@ -192,7 +211,11 @@ def _polygon(rng: np.random.Generator, n: int) -> np.ndarray:
 
 
 def _add_chicanes(rng: np.random.Generator, points: np.ndarray) -> np.ndarray:
-    """Up to two chicanes: two points offset to one side on a long edge, m."""
+    """The polygon (points, m) with up to two chicanes added.
+
+    A chicane is two points offset to one side of a long edge: the road steps aside by 8-16 m
+    over 50-120 m and back.
+    """
     edges = np.roll(points, -1, axis=0) - points
     lengths = np.hypot(*edges.T)
     out = [points[i] for i in range(len(points))]
