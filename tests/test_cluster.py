@@ -7,6 +7,7 @@ with one line before any work.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import subprocess
@@ -32,10 +33,12 @@ def _start(args: list[str], log: Path) -> subprocess.Popen:
         )
 
 
-@pytest.fixture(scope="module")
-def scheduler(tmp_path_factory):
-    """The address of a scheduler with two single-threaded workers, on localhost."""
-    folder = tmp_path_factory.mktemp("dask")
+@contextlib.contextmanager
+def _cluster(folder: Path, workers: int = 2):
+    """A scheduler and ``workers`` single-threaded workers on localhost: (address, processes).
+
+    Workers run without a nanny, so that a killed worker stays dead (a lost machine).
+    """
     info = folder / "scheduler.json"
     procs = [
         _start(
@@ -53,15 +56,15 @@ def scheduler(tmp_path_factory):
             pytest.fail(
                 "the Dask scheduler did not start: " + (folder / "scheduler.log").read_text()
             )
-        for k in range(2):
+        for k in range(workers):
             procs.append(
                 _start(
                     ["distributed.cli.dask_worker", "--scheduler-file", str(info), "--nthreads",
-                     "1", "--no-dashboard", "--name", f"worker-{k}"],
+                     "1", "--no-dashboard", "--no-nanny", "--name", f"worker-{k}"],
                     folder / f"worker-{k}.log",
                 )
             )  # fmt: skip
-        yield json.loads(info.read_text())["address"]
+        yield json.loads(info.read_text())["address"], procs
     finally:
         for proc in reversed(procs):
             proc.terminate()
@@ -70,6 +73,13 @@ def scheduler(tmp_path_factory):
                 proc.wait(timeout=20)
             except subprocess.TimeoutExpired:
                 proc.kill()
+
+
+@pytest.fixture(scope="module")
+def scheduler(tmp_path_factory):
+    """The address of a scheduler with two single-threaded workers, on localhost."""
+    with _cluster(tmp_path_factory.mktemp("dask")) as (address, _):
+        yield address
 
 
 @pytest.fixture(scope="module")
@@ -138,3 +148,31 @@ def test_checkpoints_of_other_circuits_or_seeds_are_not_resumed(circuits, tmp_pa
         capsys.readouterr()
         assert main([*argv, *other]) == 2
         assert "tune other circuits or seeds" in capsys.readouterr().err
+
+
+def test_a_worker_lost_mid_run_loses_no_finished_generation(circuits, tmp_path, capsys):
+    """Kill one of two workers after the first generation: the run finishes on the other, with the
+    weights a local run gives, and the checkpoints kept every generation."""
+    out = tmp_path / "w.json"
+    argv = ["tune", "--tracks", str(circuits), "--seeds", "2", "--budget", "3", "--popsize", "4",
+            "--out", str(out)]  # fmt: skip
+    history = tmp_path / "w_checkpoints" / "history.json"
+    with _cluster(tmp_path) as (address, procs):
+        run = subprocess.Popen(
+            [sys.executable, "-m", "racing_lib.face.cli", *argv, "--scheduler", address],
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        )  # fmt: skip
+        for _ in range(600):
+            if history.is_file() and json.loads(history.read_text())["generations"] >= 1:
+                break
+            time.sleep(0.1)
+        else:
+            run.kill()
+            pytest.fail("no generation finished: " + run.communicate()[1][-2000:])
+        procs[1].kill()  # a worker lost, without a goodbye
+        _, err = run.communicate(timeout=600)
+        assert run.returncode == 0, err[-2000:]
+    on_cluster = json.loads(out.read_text())
+    assert json.loads(history.read_text())["generations"] == 3  # every generation kept
+    local = _tune(["--workers", "2", "--budget", "3"], circuits, tmp_path / "local.json", capsys)
+    assert on_cluster["weights"] == local["weights"]
