@@ -43,3 +43,37 @@ def real_track_files() -> list[Path]:
     if not files:
         pytest.skip("../shared/tracks is not beside the repository")
     return files
+
+
+# --------------------------------------------------------------------------------------------------
+# The notebooks' runs, kept for the book (book/kept_runs.py): a notebook whose every code cell ran
+# without error here is written with its outputs to build/notebook-runs/, and book/execute.py takes
+# it instead of running the notebook again while nothing it depends on has changed.
+def _kept_runs():
+    spec = importlib.util.spec_from_file_location("kept_runs", REPO / "book" / "kept_runs.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+_CELL_OUTPUTS: dict[str, dict[int, list]] = {}
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_makereport(item, call):
+    outcome = yield
+    if call.when == "call" and type(item).__name__ == "IPyNbCell":
+        cells = _CELL_OUTPUTS.setdefault(str(item.fspath), {})
+        if outcome.get_result().passed and item.test_outputs is not None:
+            cells[item.cell_num] = item.test_outputs
+
+
+def pytest_runtest_teardown(item, nextitem):
+    # The last cell of a notebook: write its run now, so an interrupted session keeps it.
+    last = nextitem is None or nextitem.parent is not item.parent
+    if type(item).__name__ == "IPyNbCell" and last:
+        cells = _CELL_OUTPUTS.pop(str(item.fspath), {})
+        try:
+            _kept_runs().keep(Path(str(item.fspath)), cells)
+        except Exception as exc:  # the book then runs the notebook itself; the test is unaffected
+            print(f"note: the run of {item.fspath} was not kept for the book ({exc})")

@@ -26,6 +26,9 @@ from pathlib import Path
 
 import yaml
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # its sibling script book/kept_runs.py
+from kept_runs import KEPT, fresh_run  # noqa: E402
+
 REPO = Path(__file__).resolve().parent.parent
 TOC = REPO / "book" / "_toc.yml"
 CONFIG = REPO / "book" / "_config.yml"
@@ -68,8 +71,13 @@ def toc_notebooks(toc: Path = TOC, root: Path = REPO) -> list[Path]:
     return list(dict.fromkeys(found))
 
 
-def execute_all(notebooks: list[Path], cache_path: Path, timeout: int) -> list[Path]:
+def execute_all(
+    notebooks: list[Path], cache_path: Path, timeout: int, kept: Path | None = None
+) -> tuple[list[Path], list[Path]]:
     """Execute ``notebooks`` in parallel into a fresh jupyter-cache at ``cache_path``.
+
+    A notebook with a fresh run kept by the test suite (``book/kept_runs.py``) is not executed:
+    that run goes into the cache as it is.
 
     Parameters
     ----------
@@ -79,22 +87,32 @@ def execute_all(notebooks: list[Path], cache_path: Path, timeout: int) -> list[P
         The cache folder; removed and created anew.
     timeout : int
         Seconds any one cell may take (the book's ``execute.timeout``).
+    kept : Path, optional
+        The folder of the test suite's kept runs (default ``build/notebook-runs``; a folder
+        without runs executes every notebook).
 
     Returns
     -------
-    list of Path
+    failed : list of Path
         The notebooks whose run failed (the build runs them again and reports the error).
+    reused : list of Path
+        The notebooks taken from the test suite's runs.
     """
     from jupyter_cache import get_cache
     from jupyter_cache.executors import load_executor
 
     shutil.rmtree(cache_path, ignore_errors=True)
     cache = get_cache(str(cache_path))
+    reused = []
     for nb in notebooks:
         cache.add_nb_to_project(str(nb))
+        run = fresh_run(nb, KEPT if kept is None else kept)
+        if run is not None:
+            cache.cache_notebook_file(str(run), uri=str(nb))
+            reused.append(nb)
     executor = load_executor("local-parallel", cache=cache)
     result = executor.run_and_cache(timeout=timeout, allow_errors=False)
-    return [Path(uri) for uri in (*result.excepted, *result.errored)]
+    return [Path(uri) for uri in (*result.excepted, *result.errored)], reused
 
 
 def main() -> int:
@@ -106,11 +124,17 @@ def main() -> int:
     for var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
         os.environ.setdefault(var, "1")
     start = time.perf_counter()
-    failed = execute_all(notebooks, CACHE, timeout)
+    failed, reused = execute_all(notebooks, CACHE, timeout)
     elapsed = time.perf_counter() - start
+    if reused:
+        print(
+            f"book: {len(reused)} of {len(notebooks)} notebooks as the test suite ran them "
+            "(same code, library, solver versions and mode; book/kept_runs.py)"
+        )
+    ran = len(notebooks) - len(reused)
     print(
-        f"book: executed {len(notebooks) - len(failed)} of {len(notebooks)} notebooks in "
-        f"{elapsed:.0f} s on {os.cpu_count()} cores"
+        f"book: executed {ran - len(failed)} of {ran} notebooks in {elapsed:.0f} s "
+        f"on {os.cpu_count()} cores"
     )
     for nb in failed:
         # Not fatal here: the build executes this notebook again and fails with its error.

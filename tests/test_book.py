@@ -355,12 +355,59 @@ def test_the_build_finds_the_parallel_runs_outputs_and_reruns_a_failed_notebook(
     cache_path = tmp_path / "cache"
     (cache_path / "stale").mkdir(parents=True)  # an earlier build's cache: emptied first
 
-    failed = _book_script("execute").execute_all([good, bad], cache_path, timeout=60)
+    failed, reused = _book_script("execute").execute_all(
+        [good, bad], cache_path, timeout=60, kept=tmp_path / "no-kept-runs"
+    )
 
-    assert failed == [bad]
+    assert failed == [bad] and reused == []
     assert not (cache_path / "stale").exists()
     cache = jupyter_cache.get_cache(str(cache_path))
     _, merged = cache.merge_match_into_notebook(nbformat.read(good, as_version=4))
     assert merged.cells[0].outputs[0]["text"].strip() == "42"
     with pytest.raises(KeyError):
         cache.match_cache_notebook(nbformat.read(bad, as_version=4))
+
+
+def _one_cell_notebook(path: Path, code: str) -> Path:
+    nbformat = pytest.importorskip("nbformat")
+    nb = nbformat.v4.new_notebook(cells=[nbformat.v4.new_code_cell(code)])
+    nb.metadata["kernelspec"] = {"name": "python3", "display_name": "Python 3"}
+    nbformat.write(nb, path)
+    return path
+
+
+def _stream(text: str):
+    nbformat = pytest.importorskip("nbformat")
+    return nbformat.v4.new_output("stream", name="stdout", text=text)
+
+
+def test_a_kept_run_is_fresh_until_its_code_changes_and_an_incomplete_run_is_not_kept(tmp_path):
+    kept_runs = _book_script("kept_runs")
+    nb = _one_cell_notebook(tmp_path / "one.ipynb", "print(6 * 7)")
+    kept = tmp_path / "kept"
+
+    written = kept_runs.keep(nb, {0: [_stream("42\n")]}, kept)
+
+    assert written is not None and kept_runs.fresh_run(nb, kept) == written
+    _one_cell_notebook(nb, "print(6 * 8)")  # the notebook edited after the tests ran
+    assert kept_runs.fresh_run(nb, kept) is None
+    kept_runs.keep(nb, {0: [_stream("48\n")]}, kept)
+    assert kept_runs.fresh_run(nb, kept) is not None
+    assert kept_runs.keep(nb, {}, kept) is None  # its cell failed this time: nothing kept ...
+    assert kept_runs.fresh_run(nb, kept) is None  # ... and the older run is gone
+
+
+def test_the_book_takes_a_kept_run_instead_of_executing_the_notebook(tmp_path):
+    jupyter_cache = pytest.importorskip("jupyter_cache", reason="needs the [book] extras")
+    nbformat = pytest.importorskip("nbformat")
+    # Executing this notebook would fail: a build that reports no failure did not execute it.
+    nb = _one_cell_notebook(tmp_path / "kept.ipynb", "raise ValueError('executed after all')")
+    kept = tmp_path / "kept"
+    _book_script("kept_runs").keep(nb, {0: [_stream("as the tests ran it\n")]}, kept)
+
+    failed, reused = _book_script("execute").execute_all([nb], tmp_path / "cache", 60, kept)
+
+    assert (failed, reused) == ([], [nb])
+    cache = jupyter_cache.get_cache(str(tmp_path / "cache"))
+    _, merged = cache.merge_match_into_notebook(nbformat.read(nb, as_version=4))
+    assert merged.cells[0].outputs[0]["text"] == "as the tests ran it\n"
