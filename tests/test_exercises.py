@@ -11,6 +11,7 @@ from __future__ import annotations
 import importlib.util
 import json
 import math
+import re
 import sys
 import time
 from pathlib import Path
@@ -253,6 +254,23 @@ def test_spatial_lap_time_without_the_offset_factor():
 
 def test_peak_slip_angle_without_the_tangent():
     _wrong(ch04.check_peak_slip_angle(lambda B, C: math.pi / (2.0 * C) / B), "peaks at", "deg")
+
+
+def test_an_angle_in_degrees_is_named_as_such_and_not_converted_again():
+    def peak_in_degrees(B, C):
+        return math.degrees(math.tan(math.pi / (2.0 * C)) / B)
+
+    result = ch04.check_peak_slip_angle(peak_in_degrees)
+    _wrong(result, "in degrees", "radians")
+    # Not "peaks at 188 deg": the answer is not converted a second time.
+    assert re.search(r"\d deg\b", str(result)) is None, str(result)
+
+    def slip_in_degrees(params, v_x, v_y, r, delta):
+        front = delta - (v_y + params.l_f * r) / v_x  # the model's small-angle slip (Eq. 11)
+        rear = -(v_y - params.l_r * r) / v_x
+        return math.degrees(front), math.degrees(rear)
+
+    _wrong(ch02.check_slip_angles(slip_in_degrees), "in degrees", "radians")
 
 
 def test_heuristic_trajectory_blending_too_slowly():

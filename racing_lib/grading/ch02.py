@@ -25,6 +25,7 @@ from racing_lib.grading.grader import (
     differs,
     expect_close,
     grade,
+    refuse_degrees,
 )
 from racing_lib.model import Model, ModelParams
 from racing_lib.vehicle import longitudinal_load_transfer, pacejka_lateral, static_axle_loads
@@ -68,6 +69,7 @@ def check_slip_angles(slip_angles) -> CheckResult:
             for axle, key, value in (("front", "alpha_f", got[0]), ("rear", "alpha_r", got[1])):
                 g, e = as_float(value, key), float(terms[key])
                 if differs(g, e, tol=1e-5):
+                    refuse_degrees(g, e, f"{axle} slip angle {state}")
                     msg = (
                         f"{state}, your {axle} tyres see a slip angle of {g * _DEG:.2f} deg; "
                         f"they see {e * _DEG:.2f} deg (expected {key} = {e:.5f} rad, got {g:.5f})."

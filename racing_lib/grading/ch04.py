@@ -26,6 +26,7 @@ from racing_lib.grading.grader import (
     differs,
     every_case,
     grade,
+    refuse_degrees,
     refuse_library,
 )
 from racing_lib.model import ModelParams
@@ -113,6 +114,7 @@ def check_peak_slip_angle(peak_slip_angle) -> CheckResult:
             ):
                 g = as_float(call(peak_slip_angle, B, C), "peak_slip_angle")
                 if differs(g, e, tol=0.0, rel=1e-9):
+                    refuse_degrees(g, e, f"peak slip angle of the {axle} tyre")
                     raise Wrong(
                         f"for a {axle} tyre with B = {B:.1f} 1/rad and C = {C:.2f} your force "
                         f"peaks at a slip angle of {g * _DEG:.2f} deg; it peaks at "

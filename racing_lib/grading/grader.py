@@ -249,6 +249,20 @@ def differs(got: ArrayLike, expected: ArrayLike, *, tol: float, rel: float = 0.0
     return not bool(np.all(ok))
 
 
+def refuse_degrees(got: float, expected: float, what: str) -> None:
+    """Raise :class:`Wrong` when ``got`` is the angle ``expected`` (rad) given in degrees.
+
+    Checked before the general message, which prints both angles in degrees too: converting an
+    answer that already is in degrees would tell the student of a 188 deg slip angle.
+    """
+    deg = math.degrees(float(expected))
+    if deg != 0.0 and abs(float(got) - deg) <= 1e-3 * abs(deg):
+        raise Wrong(
+            f"your {what} is {float(got):.4g}: that is the right angle in degrees. Return it in "
+            f"radians ({float(expected):.5f} rad), as every angle in racing_lib is."
+        )
+
+
 def expect_close(
     got: float, expected: float, *, tol: float, message: str, rel: float = 0.0
 ) -> None:
