@@ -5,7 +5,9 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
+from scipy import stats
 
 from racing_lib.errors import ArgumentError
 from racing_lib.experiments.ablation.claims import (
@@ -15,9 +17,12 @@ from racing_lib.experiments.ablation.claims import (
     Claim,
     agreement,
     citation,
+    decided,
     direction,
     format_scores,
     score,
+    verdict_counts,
+    welch_interval,
 )
 from racing_lib.experiments.ablation.paper import (
     PAPER,
@@ -25,6 +30,7 @@ from racing_lib.experiments.ablation.paper import (
     PAPER_FIELDS,
     PAPER_ROW_LABELS,
     row_measures,
+    row_trials,
 )
 from racing_lib.experiments.ablation.rows import ablation_rows
 from racing_lib.experiments.ablation.table import shipped_table
@@ -152,5 +158,64 @@ def _notebook_output(call: str) -> str:
 
 
 def test_the_shipped_table_scores_as_chapter_07_reports():
-    ours = {row["name"]: row_measures(row) for row in shipped_table()}
-    assert _notebook_output("print(format_scores(") == format_scores(score(ours)) + "\n"
+    rows = shipped_table()
+    ours = {row["name"]: row_measures(row) for row in rows}
+    trials = {row["name"]: row_trials(row) for row in rows}
+    expected = format_scores(score(ours, trials=trials)) + "\n"
+    assert _notebook_output("print(format_scores(") == expected
+
+
+def test_the_welch_interval_is_the_one_of_welchs_t_test():
+    rng = np.random.default_rng(3)
+    x, y = rng.normal(1.0, 0.3, 10), rng.normal(0.7, 0.1, 8)
+    lo, hi = welch_interval(x, y, level=0.95)
+    # Welch's test rejects "no difference" at 5 % exactly when the 95 % interval excludes 0.
+    p = stats.ttest_ind(x, y, equal_var=False).pvalue
+    assert (lo > 0 or hi < 0) == (p < 0.05)
+    half = stats.t.ppf(0.975, 10.44) * np.hypot(x.std(ddof=1) / 10**0.5, y.std(ddof=1) / 8**0.5)
+    assert abs((hi - lo) / 2 - half) < 0.05 * half  # the Welch-Satterthwaite dof, about 10
+    assert welch_interval(np.array([2.0, 2.0]), np.array([2.0])) == (0.0, 0.0)
+
+
+def _noisy(rows: dict[str, tuple[float, float]]) -> tuple[dict, dict]:
+    """A made-up table whose rows' closed-loop laps are 10 trials of mean +- spread."""
+    table, trials = _uniform(), {}
+    for name, (mean, spread) in rows.items():
+        laps = mean + spread * np.linspace(-1.0, 1.0, 10)
+        table[name] = {**table[name], "mean": float(laps.mean())}
+        trials[name] = {"lap_time_s": laps}
+    return table, trials
+
+
+def test_a_difference_inside_the_spread_of_the_trials_is_indistinguishable():
+    slower = _claim("decoupled MPC: the closed loop is slower")
+    # 0.02 s slower on laps that spread by +-0.15 s: either answer was possible.
+    table, trials = _noisy({"decoupled": (101.05, 0.15), "main": (101.03, 0.15)})
+    assert direction(slower, table) and not decided(slower, table, trials)
+    # 0.5 s slower on the same spread: decided.
+    table, trials = _noisy({"decoupled": (101.53, 0.15), "main": (101.03, 0.15)})
+    assert decided(slower, table, trials)
+    within = _claim("lateral weight transfer: closed loop within 0.5 % of main's")
+    table, trials = _noisy({"lateral-weight-transfer": (101.05, 0.1), "main": (101.03, 0.1)})
+    assert decided(within, table, trials)  # the interval lies inside +-0.5 % of 101 s
+    table, trials = _noisy({"lateral-weight-transfer": (101.4, 1.0), "main": (101.03, 1.0)})
+    assert not decided(within, table, trials)  # it reaches past 0.5 %
+    # The plan is deterministic: a planned-lap claim is always decided.
+    optimistic = _claim("no drag: the plan is faster than main's (optimistic)")
+    assert decided(optimistic, table, trials)
+
+
+def test_scores_weighed_against_the_trials_say_which_are_within_the_noise():
+    slower = _claim("decoupled MPC: the closed loop is slower")
+    faster = _claim("no drag: the closed loop is slower than main's")
+    table, trials = _noisy(
+        {"decoupled": (101.05, 0.15), "no-drag": (100.0, 0.05), "main": (101.03, 0.15)}
+    )
+    scores = score(table, claims=[slower, faster], trials=trials)
+    assert [s.verdict for s in scores] == ["indistinguishable", "disagrees"]
+    assert verdict_counts(scores) == {"agrees": 0, "disagrees": 1, "indistinguishable": 1}
+    text = format_scores(scores)
+    assert "<- within the noise" in text.splitlines()[1]
+    assert text.endswith("agrees 0, disagrees 1, indistinguishable 1")
+    # Without trials every answer counts as decided, as before.
+    assert all(s.decided for s in score(table, claims=[slower, faster]))

@@ -25,9 +25,13 @@ True
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
+
+import numpy as np
+from scipy import stats
 
 from racing_lib.errors import ArgumentError
 from racing_lib.experiments.ablation.paper import (
@@ -39,6 +43,7 @@ from racing_lib.experiments.ablation.paper import (
 
 __all__ = [
     "CLAIMS",
+    "LEVEL",
     "QUANTITIES",
     "RELATIONS",
     "Claim",
@@ -47,9 +52,12 @@ __all__ = [
     "Verdict",
     "agreement",
     "citation",
+    "decided",
     "direction",
     "format_scores",
     "score",
+    "verdict_counts",
+    "welch_interval",
 ]
 
 #: A table the claims are decided on: row name -> field of
@@ -72,16 +80,22 @@ class Quantity:
         Its unit (``"1"``: a fraction).
     value : callable
         ``value(measures) -> float``: the quantity from one row's measures.
+    per_trial : callable or None
+        ``per_trial(measures, trials) -> ndarray``: the quantity of each completed trial of the row
+        (``trials`` from :func:`~racing_lib.experiments.ablation.paper.row_trials`), whose spread
+        :func:`decided` weighs; None for a quantity without spread (the plan is deterministic).
     """
 
     name: str
     fields: tuple[str, ...]
     unit: str
     value: Callable[[Mapping[str, Any]], float]
+    per_trial: Callable[[Mapping[str, Any], Mapping[str, np.ndarray]], np.ndarray] | None = None
 
 
-def _field(name: str, unit: str) -> Quantity:
-    return Quantity(name, (name,), unit, lambda m: m[name])
+def _field(name: str, unit: str, trial_field: str | None = None) -> Quantity:
+    per_trial = None if trial_field is None else (lambda m, trials: trials[trial_field])
+    return Quantity(name, (name,), unit, lambda m: m[name], per_trial)
 
 
 #: The quantities of :data:`CLAIMS`, by name: four columns of the paper's tables, the wall contacts
@@ -90,13 +104,19 @@ def _field(name: str, unit: str) -> Quantity:
 #: (closed-loop mean - planned lap, s).
 QUANTITIES: dict[str, Quantity] = {
     "planned": _field("planned", "s"),
-    "mean": _field("mean", "s"),
-    "vx": _field("vx", "m/s"),
-    "ey": _field("ey", "m"),
-    "walls": _field("walls", "contacts"),
-    "plan_gap": Quantity("plan_gap", ("planned", "mean"), "1", plan_gap),
-    "loss": Quantity("loss", ("planned", "mean"), "s", lambda m: m["mean"] - m["planned"]),
-}
+    "mean": _field("mean", "s", "lap_time_s"),
+    "vx": _field("vx", "m/s", "vx_mae_mps"),
+    "ey": _field("ey", "m", "ey_mae_m"),
+    "walls": _field("walls", "contacts", "wall_contacts"),
+    "plan_gap": Quantity(
+        "plan_gap", ("planned", "mean"), "1", plan_gap,
+        lambda m, trials: trials["lap_time_s"] / m["planned"] - 1.0,
+    ),
+    "loss": Quantity(
+        "loss", ("planned", "mean"), "s", lambda m: m["mean"] - m["planned"],
+        lambda m, trials: trials["lap_time_s"] - m["planned"],
+    ),
+}  # fmt: skip
 
 #: The comparisons a claim can make, ``(row value, base value or None, bound or None) -> bool``:
 #: ``greater`` and ``less`` than the base row's value, ``below`` a bound, and ``within`` a relative
@@ -233,6 +253,82 @@ def direction(claim: Claim, table: Measures) -> bool:
     return bool(RELATIONS[claim.relation](x, base, claim.bound))
 
 
+#: Confidence level of :func:`decided`.
+LEVEL = 0.95
+
+
+def welch_interval(x: np.ndarray, y: np.ndarray, level: float = LEVEL) -> tuple[float, float]:
+    """Confidence interval of ``mean(x) - mean(y)`` for two samples of unequal spread (Welch).
+
+    ``y`` may hold a single value without spread (a bound, a deterministic plan): the interval
+    is then the one-sample interval of ``mean(x)`` shifted by it.
+
+    Returns
+    -------
+    (float, float)
+        The interval's ends; both equal the difference when neither sample has any spread.
+    """
+    x, y = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
+    diff = float(x.mean() - y.mean())
+    parts = [a.var(ddof=1) / a.size if a.size > 1 else 0.0 for a in (x, y)]
+    se2 = parts[0] + parts[1]
+    if se2 <= 0.0:
+        return diff, diff
+    # Welch-Satterthwaite degrees of freedom; a sample of one contributes none.
+    dof = se2**2 / sum(p**2 / (a.size - 1) for p, a in zip(parts, (x, y), strict=True) if p > 0)
+    half = float(stats.t.ppf(0.5 + level / 2.0, dof)) * math.sqrt(se2)
+    return diff - half, diff + half
+
+
+def decided(
+    claim: Claim,
+    table: Measures,
+    trials: Mapping[str, Mapping[str, np.ndarray]],
+    level: float = LEVEL,
+) -> bool:
+    """Whether ``table`` answers ``claim`` beyond the spread of its trials.
+
+    The claim's quantity is taken trial by trial (the completed laps of each row, seeds as
+    samples), and the ``level`` confidence interval of the difference it compares is computed
+    (:func:`welch_interval`): against the base row's trials, or against the bound. The answer is
+    decided when the whole interval lies on one side of the claim's boundary (for ``within``:
+    wholly inside or wholly outside the relative bound of the base's mean); when the boundary is
+    inside the interval, the trials could have given either answer. A quantity without spread
+    (the planned lap) and a row without two completed laps are always decided.
+
+    Parameters
+    ----------
+    claim : Claim
+        The claim.
+    table : mapping
+        Row name -> measures.
+    trials : mapping
+        Row name -> per-trial arrays (:func:`~racing_lib.experiments.ablation.paper.row_trials`).
+    level : float
+        Confidence level of the interval.
+    """
+    quantity = QUANTITIES[claim.quantity]
+    if quantity.per_trial is None or claim.row not in trials:
+        return True
+
+    def samples(name: str) -> np.ndarray:
+        values = quantity.per_trial(table[name], trials[name])  # type: ignore[misc]
+        return np.asarray(values, dtype=float)
+
+    x = samples(claim.row)
+    if claim.relation == "below":
+        y = np.array([claim.bound], dtype=float)
+    else:
+        y = samples(str(claim.base))
+    if x.size < 2 or y.size < 1 or not np.all(np.isfinite(x)) or not np.all(np.isfinite(y)):
+        return True
+    lo, hi = welch_interval(x, y, level)
+    if claim.relation == "within":
+        limit = float(claim.bound) * abs(float(y.mean()))
+        return (-limit < lo and hi < limit) or hi <= -limit or lo >= limit
+    return lo > 0.0 or hi < 0.0 or lo == hi
+
+
 @dataclass(frozen=True)
 class Score:
     """One claim decided on the paper's table and on ours.
@@ -243,16 +339,27 @@ class Score:
         The claim.
     paper, ours : bool
         Whether it holds on the paper's table and on ours.
+    decided : bool
+        Whether our answer stands beyond the spread of our trials (:func:`decided`); True when
+        no trials were given to weigh it.
     """
 
     claim: Claim
     paper: bool
     ours: bool
+    decided: bool = True
 
     @property
     def agrees(self) -> bool:
         """Our table decides the claim as the paper's does."""
         return self.paper == self.ours
+
+    @property
+    def verdict(self) -> str:
+        """``"agrees"``, ``"disagrees"``, or ``"indistinguishable"`` when our trials cannot tell."""
+        if not self.decided:
+            return "indistinguishable"
+        return "agrees" if self.agrees else "disagrees"
 
 
 def score(
@@ -260,8 +367,15 @@ def score(
     paper: Measures = PAPER,
     claims: Sequence[Claim] = CLAIMS,
     verdict: Verdict = direction,
+    trials: Mapping[str, Mapping[str, np.ndarray]] | None = None,
+    level: float = LEVEL,
 ) -> list[Score]:
     """Decide every claim on the paper's table and on ours.
+
+    With ``trials``, each of our answers is also weighed against the spread of our laps
+    (:func:`decided`), and a claim our trials cannot answer is scored ``indistinguishable``
+    (:attr:`Score.verdict`). The paper's table gives no per-trial laps: its answers are taken as
+    its authors drew them.
 
     Parameters
     ----------
@@ -273,6 +387,11 @@ def score(
         The claims (default :data:`CLAIMS`).
     verdict : Verdict
         Decides one claim on one table (default :func:`direction`).
+    trials : mapping, optional
+        Our rows' per-trial arrays (row name ->
+        :func:`~racing_lib.experiments.ablation.paper.row_trials`).
+    level : float
+        Confidence level of the interval that weighs our answers.
 
     Returns
     -------
@@ -291,7 +410,15 @@ def score(
                 f"the claims read rows that {name} table lacks: {', '.join(missing)}; pass a table "
                 "with every row of the ablation (or only the claims about the rows it has)."
             )
-    return [Score(c, verdict(c, paper), verdict(c, ours)) for c in claims]
+    return [
+        Score(
+            c,
+            verdict(c, paper),
+            verdict(c, ours),
+            True if trials is None else decided(c, ours, trials, level),
+        )
+        for c in claims
+    ]
 
 
 def agreement(scores: Sequence[Score]) -> int:
@@ -299,17 +426,35 @@ def agreement(scores: Sequence[Score]) -> int:
     return sum(s.agrees for s in scores)
 
 
-def format_scores(scores: Sequence[Score]) -> str:
-    """The scores as chapter 07 prints them: one line per claim, then the agreement.
+def verdict_counts(scores: Sequence[Score]) -> dict[str, int]:
+    """How many claims are ``agrees``, ``disagrees`` and ``indistinguishable``."""
+    counts = {"agrees": 0, "disagrees": 0, "indistinguishable": 0}
+    for s in scores:
+        counts[s.verdict] += 1
+    return counts
 
-    A claim decided differently on the two tables is marked ``<- differs``.
+
+def format_scores(scores: Sequence[Score]) -> str:
+    """The scores as chapter 07 prints them: one line per claim, then the counts.
+
+    A claim decided differently on the two tables is marked ``<- differs``, one our trials cannot
+    answer (:func:`decided`) ``<- within the noise``.
     """
     lines = [f"{'':<14}{'claim':<66}{'paper':>6}{'ours':>6}"]
     for s in scores:
         mark = "" if s.agrees else "   <- differs"
+        if not s.decided:
+            mark = "   <- within the noise"
         lines.append(f"{s.claim.group:<14}{s.claim.text:<66}{s.paper!s:>6}{s.ours!s:>6}{mark}")
     lines.append("")
     lines.append(
         f"the simulated car agrees with the paper on {agreement(scores)} of {len(scores)} directions"
     )
+    if not all(s.decided for s in scores):
+        counts = verdict_counts(scores)
+        lines.append(
+            f"weighed against the spread of our trials ({100 * LEVEL:.0f} % intervals): agrees "
+            f"{counts['agrees']}, disagrees {counts['disagrees']}, indistinguishable "
+            f"{counts['indistinguishable']}"
+        )
     return "\n".join(lines)

@@ -31,6 +31,7 @@ __all__ = [
     "row_line_xy",
     "row_measures",
     "row_profile",
+    "row_trials",
 ]
 
 #: The fields of a row, in the paper's column order: planned lap, closed-loop lap mean, std and
@@ -125,6 +126,18 @@ def row_measures(row: TableRow) -> dict[str, float | None]:
         "ey_max": row["ey_max_m"],
         "walls": row["wall_contacts_per_lap"] if row["boundary"] == "walls" else None,
     }
+
+
+def row_trials(row: TableRow) -> dict[str, np.ndarray]:
+    """The completed trials of one of our rows, field by field: one value per seeded lap.
+
+    Keys ``lap_time_s`` (s), ``vx_mae_mps`` (m/s), ``ey_mae_m`` (m) and ``wall_contacts`` (per
+    lap; zeros on an open track), the samples whose spread the claims' verdicts weigh
+    (:func:`racing_lib.experiments.ablation.claims.decided`).
+    """
+    done = [t for t in row["trial_metrics"] if t["completed"]]
+    fields = ("lap_time_s", "vx_mae_mps", "ey_mae_m", "wall_contacts")
+    return {f: np.array([float(t[f]) for t in done]) for f in fields}
 
 
 def plan_gap(measures: Mapping[str, float | None]) -> float:
