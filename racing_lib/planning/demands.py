@@ -33,7 +33,7 @@ from racing_lib.planning.trajectory import Trajectory
 from racing_lib.vehicle import VehicleParams
 from racing_lib.vehicle.forces import NUMPY_OPS, slip_angles
 
-__all__ = ["Demand", "format_demands", "plan_demands"]
+__all__ = ["Demand", "ellipse_use", "format_demands", "motion_accelerations", "plan_demands"]
 
 
 @dataclass(frozen=True)
@@ -93,6 +93,62 @@ def _inside(s: np.ndarray, length: float, where: tuple[float, float] | None) -> 
     return inside
 
 
+def motion_accelerations(
+    t: np.ndarray,
+    vx: np.ndarray,
+    vy: np.ndarray,
+    r: np.ndarray,
+    params: ModelParams,
+    *,
+    lap_time: float | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The accelerations the tyres must supply along a motion: the plan's or a lap's.
+
+    Laterally ``dv_y/dt + r v_x``; along the car ``dv_x/dt - r v_y`` plus what drag and rolling
+    resistance take (the tyres push against those too). From the motion alone, not from a tyre
+    model, so the measure does not depend on the friction a plan was made with.
+
+    Parameters
+    ----------
+    t : ndarray
+        Time of each sample, s.
+    vx, vy : ndarray
+        Longitudinal and lateral speed, m/s.
+    r : ndarray
+        Yaw rate, rad/s.
+    params : ModelParams
+        For the drag coefficient, the mass and the rolling resistance.
+    lap_time : float, optional
+        Given for a closed lap (a plan): the sample after the last is the first, one lap later.
+        Without it the derivatives are central differences along an open log.
+
+    Returns
+    -------
+    a_long, a_lat : ndarray
+        m/s^2, one per sample.
+    """
+    t, vx, vy, r = (np.asarray(a, dtype=float) for a in (t, vx, vy, r))
+    if lap_time is not None:
+        dt = np.maximum(np.append(t[1:], lap_time) - t, 1e-9)
+        dvx = (np.roll(vx, -1) - vx) / dt
+        dvy = (np.roll(vy, -1) - vy) / dt
+    else:
+        dvx, dvy = np.gradient(vx, t), np.gradient(vy, t)
+    resist = (params.C_xw * vx * vx) / params.m + params.c_rr * params.g
+    return dvx - r * vy + resist, dvy + r * vx
+
+
+def ellipse_use(a_long: np.ndarray, a_lat: np.ndarray, params: ModelParams) -> np.ndarray:
+    """The share of the identified friction ellipse that accelerations use (1 = the model's limit).
+
+    The ellipse of the planner's g-g diagram, at the model's full friction: laterally the tyres'
+    peak acceleration, along the car the smaller of that and the pedal map's full brake.
+    """
+    grip = params.peak_acceleration()
+    grip_x = min(grip, params.pedal.full_brake())
+    return np.hypot(np.asarray(a_long) / grip_x, np.asarray(a_lat) / grip)
+
+
 def plan_demands(
     trajectory: Trajectory,
     params: ModelParams | None = None,
@@ -139,17 +195,10 @@ def plan_demands(
     ax = np.asarray(trajectory.ax, dtype=float)
     inside = _inside(s, trajectory.length, where)
 
-    # Time derivatives on the closed lap (the node after the last is the first, one lap later).
+    a_long, a_lat = motion_accelerations(t, vx, vy, r, params, lap_time=trajectory.lap_time)
+    use = ellipse_use(a_long, a_lat, params)
     t_next = np.append(t[1:], trajectory.lap_time)
     dt = np.maximum(t_next - t, 1e-9)
-    dvx = (np.roll(vx, -1) - vx) / dt
-    dvy = (np.roll(vy, -1) - vy) / dt
-    a_lat = dvy + r * vx
-    resist = (params.C_xw * vx * vx) / params.m + params.c_rr * params.g
-    a_long = dvx - r * vy + resist
-    grip = params.peak_acceleration()
-    grip_x = min(grip, params.pedal.full_brake())
-    use = np.hypot(a_long / grip_x, a_lat / grip)
 
     v_safe = np.maximum(vx, 1.0)
     alpha_f, alpha_r = slip_angles(
