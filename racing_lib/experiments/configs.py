@@ -50,6 +50,7 @@ __all__ = [
     "tuned_configurations",
     "tuned_weights",
     "tuning_history",
+    "tuning_record",
 ]
 
 
@@ -174,6 +175,23 @@ def tuning_history(config: str = "main") -> list[dict[str, float]]:
     """
     entry = _read_tuned_file().get(config) or {}
     return [dict(h) for h in entry.get("history", [])]
+
+
+def tuning_record(config: str = "main") -> dict[str, Any] | None:
+    """What the shipped tuning of a configuration was scored on, and how it went.
+
+    Returns
+    -------
+    dict or None
+        The shipped entry without its history and model: ``track`` (a name, or the list of
+        circuits tuned on), ``seeds``, ``generations``, ``evaluations`` (candidates),
+        ``objective`` and ``objective_at_defaults``, ``planned_lap_time_s``, ``settings``,
+        ``started_from``, ``created_utc``; None when nothing is shipped for ``config``.
+    """
+    entry = _read_tuned_file().get(config)
+    if not entry:
+        return None
+    return {k: v for k, v in entry.items() if k not in ("history", "model")}
 
 
 def tuned_configurations() -> list[str]:
