@@ -87,6 +87,13 @@ def check_frenet_projection(frenet_projection) -> CheckResult:
         s_got = as_float(s_got, "s")
         ey_got = as_float(ey_got, "e_y")
 
+        if max(abs(s_got - ey_exp), abs(ey_got - s_exp)) < 1e-3 and abs(s_exp - ey_exp) > 1e-3:
+            raise Wrong(
+                f"{where} your projection gives s = {s_got:.2f} m and e_y = {ey_got:.2f} m: "
+                f"those are e_y and s (expected s = {s_exp:.2f} m, e_y = {ey_exp:.2f} m).",
+                3.0,
+                "You returned (e_y, s): return s first, then e_y.",
+            )
         # s is compared modulo the lap: 0 m and the lap length are the same point.
         length = path.length
         ds = (s_got - s_exp + 0.5 * length) % length - 0.5 * length
@@ -120,6 +127,12 @@ def check_frenet_projection(frenet_projection) -> CheckResult:
             if not differs(-ey_got, ey_exp, tol=1e-3):
                 hint = "Only the sign is off: e_y is positive LEFT of the direction of travel."
                 raise Wrong(msg, 2.0, hint)
+            if abs(ey_got) < 1e-3:
+                hint = (
+                    "Your e_y is the component of (x, y) - r(s) along the track, zero at the "
+                    "nearest point: take its component along the left normal (-sin psi, cos psi)."
+                )
+                raise Wrong(msg, 2.0, hint)
             raise Wrong(msg)
 
     def body() -> str:
@@ -150,14 +163,30 @@ def check_frenet_to_cartesian(frenet_to_cartesian) -> CheckResult:
                 f"the car is (expected (x, y) = ({x_exp:.2f}, {y_exp:.2f}) m, got "
                 f"({x_got:.2f}, {y_got:.2f}) m)."
             )
-            x_m, y_m, _ = path.to_cartesian(s0, -e0)
             x_c, y_c = path.position(s0)
-            if math.hypot(x_got - x_m, y_got - y_m) < 1e-3:
-                hint = "It is on the wrong side: the normal (-sin psi, cos psi) points left."
-                raise Wrong(msg, 2.0, hint)
-            if math.hypot(x_got - x_c, y_got - y_c) < 1e-3:
-                hint = "That is the centerline point: add e_y times the left normal."
-                raise Wrong(msg, 2.0, hint)
+            psi = float(path.heading(s0))
+            psi_deg = math.radians(psi)
+            # (point a tempting mistake gives, what the mistake is)
+            mistakes = [
+                (
+                    path.to_cartesian(s0, -e0)[:2],
+                    "It is on the wrong side: the normal (-sin psi, cos psi) points left.",
+                ),
+                ((x_c, y_c), "That is the centerline point: add e_y times the left normal."),
+                (
+                    (x_c + e0 * math.cos(psi), y_c + e0 * math.sin(psi)),
+                    "You moved e_y along the track, on the tangent (cos psi, sin psi): move it "
+                    "across, along the left normal (-sin psi, cos psi).",
+                ),
+                ((y_exp, x_exp), "You returned (y, x): return x first, then y."),
+                (
+                    (x_c - e0 * math.sin(psi_deg), y_c + e0 * math.cos(psi_deg)),
+                    "path.heading is already in radians: do not convert it again.",
+                ),
+            ]
+            for (x_m, y_m), hint in mistakes:
+                if math.hypot(x_got - x_m, y_got - y_m) < 1e-3:
+                    raise Wrong(msg, 2.0, hint)
             raise Wrong(msg)
 
     def body() -> str:

@@ -23,7 +23,6 @@ from racing_lib.grading.grader import (
     as_tuple,
     call,
     differs,
-    expect_close,
     grade,
     refuse_degrees,
 )
@@ -74,8 +73,14 @@ def check_slip_angles(slip_angles) -> CheckResult:
                         f"{state}, your {axle} tyres see a slip angle of {g * _DEG:.2f} deg; "
                         f"they see {e * _DEG:.2f} deg (expected {key} = {e:.5f} rad, got {g:.5f})."
                     )
+                    other = float(terms["alpha_r" if key == "alpha_f" else "alpha_f"])
                     if not differs(-g, e, tol=1e-5):
                         msg += " The sign is reversed: positive slip makes a force to the left."
+                    elif not differs(g, other, tol=1e-5):
+                        msg += (
+                            " That is the other axle's: you returned them in the wrong order; "
+                            "return (alpha_f, alpha_r), front first."
+                        )
                     raise Wrong(msg)
         return "front and rear slip angles agree with the model in straights, corners and slides."
 
@@ -92,22 +97,32 @@ def check_tyre_force(tyre_force) -> CheckResult:
     def body() -> str:
         p = ModelParams()
         F_zf, F_zr = p.static_loads()
-        axles = (("front", F_zf, p.B_f, p.C_f, p.D_f), ("rear", F_zr, p.B_r, p.C_r, p.D_r))
+        # The default car has D = 1 on both axles: a worn tyre (D < 1, other B and C) shows
+        # whether D is in the formula at all.
+        axles = (
+            ("front", F_zf, p.B_f, p.C_f, p.D_f),
+            ("rear", F_zr, p.B_r, p.C_r, p.D_r),
+            ("worn rear", F_zr, 10.0, 1.6, 0.85),
+        )
         for name, F_z, B, C, D in axles:
             for alpha_deg in (0.5, 2.0, -4.0, 8.0, 15.0):
                 alpha = alpha_deg / _DEG
                 expected = float(pacejka_lateral(alpha, F_z, p.mu, B, C, D))
                 got = as_float(call(tyre_force, alpha, F_z, p.mu, B, C, D), "tyre_force")
-
-                expect_close(
-                    got,
-                    expected,
-                    tol=1e-6,
-                    rel=1e-9,
-                    message=f"at a slip angle of {alpha_deg:.1f} deg with {F_z / 1000:.2f} kN on "
-                    f"the {name} axle your tyres push sideways with {got:.0f} N; they push with "
-                    f"{expected:.0f} N (expected F_y = {expected:.1f} N, got {got:.1f} N).",
+                if not differs(got, expected, tol=1e-6, rel=1e-9):
+                    continue
+                msg = (
+                    f"at a slip angle of {alpha_deg:.1f} deg with {F_z / 1000:.2f} kN on the "
+                    f"{name} axle (B = {B:.1f}, C = {C:.2f}, D = {D:.2f}) your tyres push "
+                    f"sideways with {got:.0f} N; they push with {expected:.0f} N (expected F_y = "
+                    f"{expected:.1f} N, got {got:.1f} N)."
                 )
+                if not differs(-got, expected, tol=1e-6, rel=1e-9):
+                    msg += (
+                        " The force has the sign of the slip angle: a negative alpha pushes to the "
+                        "right (keep the sign of alpha, no abs)."
+                    )
+                raise Wrong(msg)
         return "the tyre force agrees with pacejka_lateral below and beyond its peak."
 
     return grade("2.2 Pacejka tyre force", body, weight=1.0)
@@ -141,7 +156,14 @@ def check_axle_loads(axle_loads) -> CheckResult:
                         f"{doing}, your {axle} axle carries {g / 1000:.2f} kN; it carries "
                         f"{e / 1000:.2f} kN (expected {key} = {e:.1f} N, got {g:.1f} N)."
                     )
-                    if a_x != 0 and not differs(g - static[i], static[i] - e, tol=1.0):
+                    swapped = (F_zr0 - dW, F_zf0 + dW) if a_x == 0 else expected[::-1]
+                    if not differs(g, swapped[i], tol=1e-2):
+                        msg += (
+                            " Front and rear are swapped: the axle nearer the centre of gravity "
+                            "carries more, F_zf0 = m g l_r / L, and the function returns "
+                            "(F_zf, F_zr), front first."
+                        )
+                    elif a_x != 0 and not differs(g - static[i], static[i] - e, tol=1.0):
                         msg += (
                             " The transfer goes the wrong way: accelerating moves load to the "
                             "rear axle, braking to the front."

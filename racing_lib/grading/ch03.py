@@ -28,12 +28,13 @@ from racing_lib.grading.grader import (
     differs,
     every_case,
     grade,
+    refuse_degrees,
     refuse_library,
 )
 from racing_lib.model import ModelOptions, ModelParams
 from racing_lib.planning import solve_curvature
 from racing_lib.planning.curvature import steady_cornering
-from racing_lib.planning.speed import speed_profile
+from racing_lib.planning.speed import segment_times, speed_profile
 from racing_lib.tracks import load_track
 
 __all__ = [
@@ -80,6 +81,12 @@ def check_cornering_speed(cornering_speed) -> CheckResult:
         arr = np.asarray(raw, dtype=float)
         if arr.shape == kappa.shape and not np.all(np.isfinite(arr)):
             k = int(np.flatnonzero(~np.isfinite(arr))[0])
+            if np.isnan(arr[k]) and kappa[k] < 0:
+                raise Wrong(
+                    f"at s = {s[k]:.0f} m ({_radius(kappa[k])}, kappa = {kappa[k]:.2g} 1/m) your "
+                    f"speed limit is {arr[k]}: the square root of a negative number. Right-hand "
+                    "bends (and the round-off on straights) have kappa < 0: use |kappa|."
+                )
             raise Wrong(
                 f"at s = {s[k]:.0f} m ({_radius(kappa[k])}, kappa = {kappa[k]:.2g} 1/m) your "
                 f"speed limit is {arr[k]}: on straights the car is limited by its top speed "
@@ -121,11 +128,20 @@ def check_lap_time(lap_time) -> CheckResult:
         p = ModelParams()
         with_drag = speed_profile(s, kappa, p, length=length)
         no_drag = speed_profile(s, kappa, p, options=ModelOptions(drag=False), length=length)
+        # Every third node dropped, the first one too: the spacing is uneven and the loop closes
+        # at s_0 + length, not at length (the grid's own nodes hide both).
+        keep = np.arange(s.size) % 3 != 0
+        s_odd, v_odd = s[keep], with_drag.v[keep]
+        odd_time = float(
+            np.sum(segment_times(np.diff(np.append(s_odd, s_odd[0] + length)), v_odd,
+                                 np.roll(v_odd, -1)))
+        )  # fmt: skip
         cases = [
-            ("the expressway's speed profile", with_drag.v, with_drag.lap_time),
-            ("the expressway's profile without drag", no_drag.v, no_drag.lap_time),
+            ("the expressway's speed profile", s, with_drag.v, with_drag.lap_time),
+            ("the expressway's profile without drag", s, no_drag.v, no_drag.lap_time),
+            ("the profile on unevenly spaced nodes from s = 5 m", s_odd, v_odd, odd_time),
         ]
-        for what, v, expected in cases:
+        for what, s, v, expected in cases:
             got = as_float(call(lap_time, s.copy(), v.copy(), length), "lap_time")
             if differs(got, expected, tol=1e-6):
                 msg = (
@@ -133,7 +149,31 @@ def check_lap_time(lap_time) -> CheckResult:
                     f"{expected:.3f} s ({abs(got - expected):.3f} s "
                     f"{'too long' if got > expected else 'too short'})."
                 )
-                ds = np.diff(np.append(s, length))
+                ds = np.diff(np.append(s, s[0] + length))
+                # (intervals, speeds at their ends, what the mistake is) of tempting mistakes
+                mistakes = [
+                    (
+                        np.diff(np.append(s, length)),
+                        np.roll(v, -1),
+                        "The last interval ends at s_0 + length, where the loop closes, not at "
+                        "length (the first node need not be at s = 0).",
+                    ),
+                    (
+                        np.full(s.size, length / s.size),
+                        np.roll(v, -1),
+                        "The nodes are unevenly spaced here: use the actual intervals "
+                        "s_{k+1} - s_k, not length / N.",
+                    ),
+                    (
+                        ds,
+                        np.roll(v, 1),
+                        "Each interval runs from node k to node k+1: use the speeds at its own "
+                        "two ends, v_k and v_{k+1}.",
+                    ),
+                ]
+                for ds_m, v_next, hint in mistakes:
+                    if not differs(got, float(np.sum(2.0 * ds_m / (v + v_next))), tol=1e-6):
+                        raise Wrong(f"{msg} {hint}")
                 if not differs(got, float(np.sum(ds / v)), tol=1e-6):
                     msg += (
                         " You divided each interval by the speed at its start: use the mean "
@@ -154,21 +194,28 @@ def check_steady_cornering(steady_state) -> CheckResult:
     corners of both directions below the friction limit.
     """
     cases = [(30.0, 1 / 200.0), (25.0, -1 / 80.0), (15.0, 1 / 30.0), (40.0, -1 / 400.0)]
-    names = (("v_y", "m/s", 1.0), ("r", "rad/s", 1.0), ("delta", "deg", _DEG))
+    # r first: v_y and delta are built on it, so a wrong r is named as such.
+    names = (("r", "rad/s", 1.0), ("v_y", "m/s", 1.0), ("delta", "deg", _DEG))
+    # The default car has D = 1 on both axles; a car on worn tyres (D < 1) needs D in the formula.
+    worn = ModelParams(D_f=0.9, D_r=0.85)
 
     def body() -> str:
-        p = ModelParams()
-        for v, kappa in cases:
-            expected = [float(x) for x in steady_cornering(np.array(v), np.array(kappa), p)]
+        for p, v, kappa in [(ModelParams(), v, k) for v, k in cases] + [(worn, 20.0, 1 / 60.0)]:
+            v_y, r, delta = (float(x) for x in steady_cornering(np.array(v), np.array(kappa), p))
+            expected = (r, v_y, delta)
             got = as_tuple(call(steady_state, p, v, kappa), 3, "steady_state")
+            got = (got[1], got[0], got[2])
             a_y = v * v * abs(kappa)
+            tyres = " on worn tyres" if p is worn else ""
             where = (
                 f"cornering {'left' if kappa > 0 else 'right'} at {v:.0f} m/s on {_radius(kappa)} "
-                f"({a_y / p.g:.2f} g)"
+                f"({a_y / p.g:.2f} g){tyres}"
             )
             for (name, unit, scale), value, e in zip(names, got, expected, strict=True):
                 g = as_float(value, name)
                 if differs(g, e, tol=1e-9, rel=1e-9):
+                    if name == "delta":
+                        refuse_degrees(g, e, f"steering angle {where}")
                     msg = (
                         f"{where}, your car has {name} = {g * scale:.4f} {unit}; steady cornering "
                         f"needs {e * scale:.4f} {unit} (expected {name} = {e:.6f}, got {g:.6f})."
@@ -293,6 +340,14 @@ def check_min_curvature_qp(min_curvature_line) -> CheckResult:
                     2.0,
                     "That is where the loop closes: the second difference of n_0 uses n_{N-1} and "
                     "that of n_{N-1} uses n_0.",
+                )
+            if np.max(np.abs(got + n_ref)) < 1e-2 * bound:
+                raise Wrong(
+                    msg,
+                    2.0,
+                    "Your line is the best one mirrored, outside where it should be inside: check "
+                    "the sign of the second difference, kappa_c + (n_{k+1} - 2 n_k + n_{k-1}) / "
+                    "ds^2 with n positive to the left.",
                 )
             if np.max(np.abs(got)) < 1e-6:
                 raise Wrong(msg, 2.0, "Your line is the centerline: include kappa_c in the cost.")

@@ -81,11 +81,19 @@ def check_heuristic_trajectory(heuristic_trajectory) -> CheckResult:
             xi0 = xi_ref[0].copy()
             xi0[:5] += offset
             expected = _library_heuristic(mpc, xi0, xi_ref)
+            given_xi0, given_ref = xi0.copy(), xi_ref.copy()
             got = as_array(
-                call(heuristic_trajectory, xi0.copy(), xi_ref.copy()),
+                call(heuristic_trajectory, given_xi0, given_ref),
                 expected.shape,
                 f"heuristic_trajectory (N + 1 = {n + 1} stages of 6 states)",
             )
+            for name, given, original in (("xi0", given_xi0, xi0), ("xi_ref", given_ref, xi_ref)):
+                if not np.array_equal(given, original):
+                    raise Wrong(
+                        f"with the car {what}, your function changed {name} in place: the "
+                        f"controller still needs {'the plan' if name == 'xi_ref' else 'the state'}"
+                        f" afterwards. Build xi_hat as a new array (or work on a copy)."
+                    )
             err = np.abs(got - expected) - 1e-9 * (1.0 + np.abs(expected))
             if np.any(err > 0):
                 k, i = np.unravel_index(int(np.argmax(err)), err.shape)
@@ -96,7 +104,14 @@ def check_heuristic_trajectory(heuristic_trajectory) -> CheckResult:
                     f"the controller uses {e:.3f} {_UNITS[i]} (expected xi_hat[{k}, {i}] = "
                     f"{e:.4f}, got {g:.4f})."
                 )
-                if k == 0:
+                lam = 1.0 - np.arange(n + 1) / n
+                moving = xi_ref + lam[:, None] * (xi0[None, :] - xi_ref)
+                if not np.any(np.abs(got - moving) > 1e-9 * (1.0 + np.abs(moving))):
+                    msg += (
+                        " You blended in the offset from each stage of the plan: the offset is "
+                        "xi_0 - xi_ref_0, the car's offset now, shrunk by lambda_k."
+                    )
+                elif k == 0:
                     msg += " At k = 0 the trajectory starts at the car's own state, xi_0."
                 elif k == n:
                     msg += " At k = N it has blended completely into the plan: xi_hat_N = xi_ref_N."
@@ -198,6 +213,14 @@ def check_pedal_inversion(pedal_for) -> CheckResult:
                 f"With the pedal released the car already does {coasting:+.2f} m/s^2 here, so "
                 f"{a_x:+.1f} m/s^2 needs {pedal}: choose throttle or brake by the sign of "
                 "a_x - (m_0 + m_xi . xi), not by the sign of a_x."
+            )
+        elif not differs(got, float(pedal_map.pedal(a_x - pedal_map.m_0 + coasting, xi)), tol=1e-9):
+            # The pedal for a_x - m_0 instead of a_x - (m_0 + m_xi . xi).
+            telling = 1.0
+            hint = (
+                f"With the pedal released the car does m_0 + m_xi . xi = {coasting:+.2f} m/s^2 "
+                f"here, not m_0 = {pedal_map.m_0:+.2f}: m_xi . xi (drag and rolling resistance) "
+                "grows with the speed."
             )
         elif not differs(
             got,
@@ -373,6 +396,16 @@ def check_lateral_mpc(mpc_steering) -> CheckResult:
                 2.0,
                 "Your first steering step is measured from 0: the rate term of stage 0 is "
                 "r (delta_0 - delta_prev)^2, from the command the car has now.",
+            )
+        if (
+            problem.r > 0.0
+            and np.max(np.abs(got - _condensed_optimum(problem._replace(r=0.0)))) < 1e-3
+        ):
+            raise Wrong(
+                msg,
+                2.0,
+                "Your commands ignore the steering-rate term r sum_k (delta_k - delta_{k-1})^2 "
+                "of the cost: it keeps the steering smooth.",
             )
         if np.max(np.abs(got - shifted)) < 1e-3:
             raise Wrong(

@@ -11,6 +11,7 @@ Exercise notebook: ``exercises/06_tuning.ipynb``. Every check compares the reade
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 
 import numpy as np
@@ -122,8 +123,18 @@ def check_tuning_objective(objective) -> CheckResult:
                 d = got - expected
                 collision = metrics.wall_contact_time_s + metrics.offtrack_time_s
                 ey = np.abs(log.ey[lap])
+                steps = np.diff(log.s_track)
+                steps = (steps + 0.5 * length) % length - 0.5 * length
+                distance = float(np.sum(steps[lap[:-1] & lap[1:]]))
+                everything = dataclasses.replace(log, in_lap=np.ones(lap.size, dtype=bool))
+                whole_log = tuning_objective(everything, metrics, W_T, W_S, track_length=length)
                 if collision and not differs(d, -W_T * collision, tol=1e-6):
                     msg += " The collision time t_c (wall contact plus time off track) is missing."
+                elif not differs(d, 2.0 * W_S * distance, tol=1e-6):
+                    msg += (
+                        " The distance term has the wrong sign: w_s D is subtracted (a lap that "
+                        "covers more track scores lower)."
+                    )
                 elif not differs(abs(d), W_S * length, tol=0.05 * W_S * length):
                     msg += (
                         " The distance term is off by about one lap times w_s: D is the distance "
@@ -134,7 +145,7 @@ def check_tuning_objective(objective) -> CheckResult:
                     abs(d), ey.mean(), tol=1e-6
                 ):
                     msg += " Both the largest and the mean lateral error |e_y| belong in J."
-                elif lap.sum() < lap.size:
+                elif not differs(got, whole_log, tol=1e-6):
                     msg += " Use only the steps of the lap itself (log.in_lap)."
                 raise Wrong(msg)
         return (

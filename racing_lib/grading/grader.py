@@ -219,6 +219,8 @@ def as_array(value: object, shape: tuple[int, ...], what: str) -> np.ndarray:
     except (TypeError, ValueError):
         raise Wrong(f"{what} should be an array of numbers, got {type(value).__name__}.") from None
     if arr.shape != shape:
+        if arr.ndim == len(shape) == 2 and arr.shape == shape[::-1] and shape[0] != shape[1]:
+            raise Wrong(f"{what} should have shape {shape}, got {arr.shape}: it is transposed.")
         if arr.size == math.prod(shape):
             arr = arr.reshape(shape)
         else:
