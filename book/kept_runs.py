@@ -88,6 +88,16 @@ def stamp(notebook: Any) -> dict[str, Any]:
     }
 
 
+def _quiet(source: str) -> bool:
+    """IPython's own rule: a cell whose last token is ``;`` shows no result."""
+    from IPython.core.displayhook import DisplayHook
+
+    try:
+        return bool(DisplayHook.semicolon_at_end_of_expression(source))
+    except (SyntaxError, ValueError):  # tokenize errors: the cell's own run reported them
+        return False
+
+
 def _kept_path(path: Path, kept: Path) -> Path:
     resolved = path.resolve()
     if resolved.is_relative_to(REPO):
@@ -125,6 +135,10 @@ def keep(path: Path, outputs: dict[int, list[Any]], kept: Path = KEPT) -> Path |
         return None
     for number, cell in enumerate(code_cells):
         cell.outputs = list(outputs[number])
+        if _quiet(cell.source):
+            # nbval runs cells outside IPython's history, where a trailing ';' does not silence
+            # the cell's result (a "<matplotlib.legend.Legend at 0x...>" line); a notebook run does.
+            cell.outputs = [o for o in cell.outputs if o.get("output_type") != "execute_result"]
         cell.execution_count = number + 1
         for output in cell.outputs:
             if output.get("output_type") == "execute_result":

@@ -397,6 +397,24 @@ def test_a_kept_run_is_fresh_until_its_code_changes_and_an_incomplete_run_is_not
     assert kept_runs.fresh_run(nb, kept) is None  # ... and the older run is gone
 
 
+def test_a_kept_run_drops_the_result_a_trailing_semicolon_silences(tmp_path):
+    nbformat = pytest.importorskip("nbformat")
+    kept_runs = _book_script("kept_runs")
+    result = nbformat.v4.new_output(
+        "execute_result", data={"text/plain": "<matplotlib.legend.Legend at 0x7f00>"}
+    )
+    quiet = _one_cell_notebook(tmp_path / "quiet.ipynb", "ax.legend();  # silenced")
+    loud = _one_cell_notebook(tmp_path / "loud.ipynb", "ax.legend()")
+    for nb in (quiet, loud):
+        kept_runs.keep(nb, {0: [_stream("drawn\n"), result]}, tmp_path / "kept")
+    outputs = {
+        nb.name: nbformat.read(kept_runs.fresh_run(nb, tmp_path / "kept"), 4).cells[0].outputs
+        for nb in (quiet, loud)
+    }
+    assert [o["output_type"] for o in outputs["quiet.ipynb"]] == ["stream"]
+    assert [o["output_type"] for o in outputs["loud.ipynb"]] == ["stream", "execute_result"]
+
+
 def test_the_book_takes_a_kept_run_instead_of_executing_the_notebook(tmp_path):
     jupyter_cache = pytest.importorskip("jupyter_cache", reason="needs the [book] extras")
     nbformat = pytest.importorskip("nbformat")
