@@ -137,7 +137,7 @@ def test_scores_mark_a_disagreement_and_take_another_verdict():
     scores = score(ours, claims=[_claim("no drag: the closed loop is slower than main's")])
     assert [(s.paper, s.ours, s.agrees) for s in scores] == [(True, False, False)]
     text = format_scores(scores)
-    assert text.splitlines()[1].endswith("True False   <- differs")
+    assert text.splitlines()[1].startswith("≠ ") and text.splitlines()[1].endswith("True False")
     assert text.endswith("agrees with the paper on 0 of 1 directions")
     # A verdict is swapped without touching the claims.
     assert agreement(score(ours, verdict=lambda claim, table: table is PAPER)) == 0
@@ -215,7 +215,7 @@ def test_scores_weighed_against_the_trials_say_which_are_within_the_noise():
     assert [s.verdict for s in scores] == ["indistinguishable", "disagrees"]
     assert verdict_counts(scores) == {"agrees": 0, "disagrees": 1, "indistinguishable": 1}
     text = format_scores(scores)
-    assert "<- within the noise" in text.splitlines()[1]
+    assert text.splitlines()[1].startswith("~ ") and text.splitlines()[2].startswith("≠ ")
     assert text.endswith("agrees 0, disagrees 1, indistinguishable 1")
     # Without trials every answer counts as decided, as before.
     assert all(s.decided for s in score(table, claims=[slower, faster]))

@@ -437,15 +437,14 @@ def verdict_counts(scores: Sequence[Score]) -> dict[str, int]:
 def format_scores(scores: Sequence[Score]) -> str:
     """The scores as chapter 07 prints them: one line per claim, then the counts.
 
-    A claim decided differently on the two tables is marked ``<- differs``, one our trials cannot
-    answer (:func:`decided`) ``<- within the noise``.
+    A claim our table decides otherwise than the paper's is marked ``≠`` in the first column, one
+    our trials cannot answer (:func:`decided`) ``~``; the marks lead the line so that a page
+    narrower than the table still shows them.
     """
-    lines = [f"{'':<14}{'claim':<66}{'paper':>6}{'ours':>6}"]
+    lines = [f"  {'':<14}{'claim':<65}{'paper':>6}{'ours':>6}"]
     for s in scores:
-        mark = "" if s.agrees else "   <- differs"
-        if not s.decided:
-            mark = "   <- within the noise"
-        lines.append(f"{s.claim.group:<14}{s.claim.text:<66}{s.paper!s:>6}{s.ours!s:>6}{mark}")
+        mark = "~" if not s.decided else ("" if s.agrees else "≠")
+        lines.append(f"{mark:<2}{s.claim.group:<14}{s.claim.text:<65}{s.paper!s:>6}{s.ours!s:>6}")
     lines.append("")
     lines.append(
         f"the simulated car agrees with the paper on {agreement(scores)} of {len(scores)} directions"
@@ -453,8 +452,11 @@ def format_scores(scores: Sequence[Score]) -> str:
     if not all(s.decided for s in scores):
         counts = verdict_counts(scores)
         lines.append(
-            f"weighed against the spread of our trials ({100 * LEVEL:.0f} % intervals): agrees "
-            f"{counts['agrees']}, disagrees {counts['disagrees']}, indistinguishable "
-            f"{counts['indistinguishable']}"
+            f"~ within the noise of our trials ({100 * LEVEL:.0f} % intervals), "
+            "≠ decided otherwise than the paper"
+        )
+        lines.append(
+            f"weighed: agrees {counts['agrees']}, disagrees {counts['disagrees']}, "
+            f"indistinguishable {counts['indistinguishable']}"
         )
     return "\n".join(lines)
