@@ -23,9 +23,10 @@ from __future__ import annotations
 import hashlib
 import json
 import os
-from importlib import metadata
 from pathlib import Path
 from typing import Any
+
+from racing_lib.provenance import package_versions
 
 REPO = Path(__file__).resolve().parent.parent
 #: Where the test session writes the runs it keeps (``build/`` is ignored by git).
@@ -58,16 +59,6 @@ def _library_digest(root: Path = REPO / "racing_lib") -> str:
     return digest.hexdigest()[:16]
 
 
-def _versions() -> dict[str, str]:
-    out = {}
-    for name in PACKAGES:
-        try:
-            out[name] = metadata.version(name)
-        except metadata.PackageNotFoundError:
-            out[name] = "not installed"
-    return out
-
-
 def _code_digest(notebook: Any) -> str:
     digest = hashlib.sha256()
     for cell in notebook.cells:
@@ -83,7 +74,7 @@ def stamp(notebook: Any) -> dict[str, Any]:
         "format": _STAMP_FORMAT,
         "code": _code_digest(notebook),
         "racing_lib": _library_digest(),
-        "packages": _versions(),
+        "packages": package_versions(PACKAGES),
         "fast_mode": os.environ.get("RACING_LIB_FAST", ""),
     }
 
