@@ -26,22 +26,15 @@ import os
 from pathlib import Path
 from typing import Any
 
-from racing_lib.provenance import package_versions
+from racing_lib.provenance import KEY_PACKAGES, package_versions
 
 REPO = Path(__file__).resolve().parent.parent
 #: Where the test session writes the runs it keeps (``build/`` is ignored by git).
 KEPT = REPO / "build" / "notebook-runs"
 #: Packages that change what a page shows; the book's extras may install others freely.
 PACKAGES = (
-    "numpy",
-    "scipy",
+    *KEY_PACKAGES,  # the solvers and numerics racing_lib's own provenance records
     "matplotlib",
-    "casadi",
-    "cvxpy",
-    "osqp",
-    "clarabel",
-    "cma",
-    "control",
     "scikit-learn",
     "ipykernel",
     "commonroad-vehicle-models",
