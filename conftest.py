@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import importlib.util
 import os
 from pathlib import Path
@@ -49,6 +50,7 @@ def real_track_files() -> list[Path]:
 # The notebooks' runs, kept for the book (book/kept_runs.py): a notebook whose every code cell ran
 # without error here is written with its outputs to build/notebook-runs/, and book/execute.py takes
 # it instead of running the notebook again while nothing it depends on has changed.
+@functools.cache
 def _kept_runs():
     spec = importlib.util.spec_from_file_location("kept_runs", REPO / "book" / "kept_runs.py")
     module = importlib.util.module_from_spec(spec)

@@ -165,7 +165,7 @@ def check_frenet_to_cartesian(frenet_to_cartesian) -> CheckResult:
             )
             x_c, y_c = path.position(s0)
             psi = float(path.heading(s0))
-            psi_deg = math.radians(psi)
+            psi_twice = math.radians(psi)  # radians converted once more
             # (point a tempting mistake gives, what the mistake is)
             mistakes = [
                 (
@@ -180,7 +180,7 @@ def check_frenet_to_cartesian(frenet_to_cartesian) -> CheckResult:
                 ),
                 ((y_exp, x_exp), "You returned (y, x): return x first, then y."),
                 (
-                    (x_c - e0 * math.sin(psi_deg), y_c + e0 * math.cos(psi_deg)),
+                    (x_c - e0 * math.sin(psi_twice), y_c + e0 * math.cos(psi_twice)),
                     "path.heading is already in radians: do not convert it again.",
                 ),
             ]

@@ -73,7 +73,8 @@ def check_spatial_lap_time(lap_time) -> CheckResult:
 
     def body() -> str:
         grid = _grid()
-        cases = [(what, grid, line) for what, line in _lines(grid)]
+        lines = _lines(grid)
+        cases = [(what, grid, line) for what, line in lines]
         # The grid is evenly spaced, where a rectangle rule or a trapezoid paired with the wrong
         # neighbour sums to the same: drop two nodes of every five to make the spacing uneven
         # (5, 10 and 10 m; alternating 5 and 10 m would still hide the neighbour).
@@ -83,7 +84,7 @@ def check_spatial_lap_time(lap_time) -> CheckResult:
             grid, s=s, ds=np.diff(np.append(s, s[0] + grid.length)), kappa=grid.kappa[keep],
             theta=grid.theta[keep], ey_min=grid.ey_min[keep], ey_max=grid.ey_max[keep],
         )  # fmt: skip
-        what, line = _lines(grid)[1]
+        what, line = lines[1]
         cases.append((f"{what}, on a grid of uneven spacing", uneven, [a[keep] for a in line]))
         for what, grid, (v_x, v_y, e_psi, e_y) in cases:
             expected = lap_time_with_model(grid, v_x, v_y, e_psi, e_y)

@@ -123,14 +123,15 @@ def check_tuning_objective(objective) -> CheckResult:
                 d = got - expected
                 collision = metrics.wall_contact_time_s + metrics.offtrack_time_s
                 ey = np.abs(log.ey[lap])
-                steps = np.diff(log.s_track)
-                steps = (steps + 0.5 * length) % length - 0.5 * length
-                distance = float(np.sum(steps[lap[:-1] & lap[1:]]))
+                # w_s D of the lap, from the library's own objective (no second unwrapping of s).
+                distance_term = (
+                    tuning_objective(log, metrics, W_T, 0.0, track_length=length) - expected
+                )
                 everything = dataclasses.replace(log, in_lap=np.ones(lap.size, dtype=bool))
                 whole_log = tuning_objective(everything, metrics, W_T, W_S, track_length=length)
                 if collision and not differs(d, -W_T * collision, tol=1e-6):
                     msg += " The collision time t_c (wall contact plus time off track) is missing."
-                elif not differs(d, 2.0 * W_S * distance, tol=1e-6):
+                elif not differs(d, 2.0 * distance_term, tol=1e-6):
                     msg += (
                         " The distance term has the wrong sign: w_s D is subtracted (a lap that "
                         "covers more track scores lower)."

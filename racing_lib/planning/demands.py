@@ -33,7 +33,14 @@ from racing_lib.planning.trajectory import Trajectory
 from racing_lib.vehicle import VehicleParams
 from racing_lib.vehicle.forces import NUMPY_OPS, slip_angles
 
-__all__ = ["Demand", "ellipse_use", "format_demands", "motion_accelerations", "plan_demands"]
+__all__ = [
+    "Demand",
+    "ellipse_axes",
+    "ellipse_use",
+    "format_demands",
+    "motion_accelerations",
+    "plan_demands",
+]
 
 
 @dataclass(frozen=True)
@@ -138,15 +145,24 @@ def motion_accelerations(
     return dvx - r * vy + resist, dvy + r * vx
 
 
-def ellipse_use(a_long: np.ndarray, a_lat: np.ndarray, params: ModelParams) -> np.ndarray:
-    """The share of the identified friction ellipse that accelerations use (1 = the model's limit).
+def ellipse_axes(params: ModelParams) -> tuple[float, float]:
+    """The half axes of the planner's friction ellipse (its g-g diagram), m/s^2.
 
-    The ellipse of the planner's g-g diagram, at the model's full friction: laterally the tyres'
-    peak acceleration, along the car the smaller of that and the pedal map's full brake.
+    At the model's full friction: along the car the smaller of the tyres' peak acceleration and
+    the pedal map's full brake, across it the peak acceleration.
+
+    Returns
+    -------
+    a_long_max, a_lat_max : float
     """
     grip = params.peak_acceleration()
-    grip_x = min(grip, params.pedal.full_brake())
-    return np.hypot(np.asarray(a_long) / grip_x, np.asarray(a_lat) / grip)
+    return min(grip, params.pedal.full_brake()), grip
+
+
+def ellipse_use(a_long: np.ndarray, a_lat: np.ndarray, params: ModelParams) -> np.ndarray:
+    """The share of the friction ellipse (:func:`ellipse_axes`) accelerations use (1: the rim)."""
+    a_long_max, a_lat_max = ellipse_axes(params)
+    return np.hypot(np.asarray(a_long) / a_long_max, np.asarray(a_lat) / a_lat_max)
 
 
 def plan_demands(
