@@ -1,17 +1,23 @@
-"""The one set-up call at the top of every notebook of the course, and its tables.
+"""The one set-up call at the top of every notebook, its tables, bound numbers and sliders.
 
 ``setup()`` fixes the plot style, NumPy's print options (so printed numbers are short and stable
 under nbval), and the random seed, and reports the versions of the solvers the chapter relies on.
 :class:`Table` shows rows of text as a real table in JupyterLab and in the book (a Markdown
-string in ``display(Markdown(...))`` reaches the book's pages as raw pipes).
+string in ``display(Markdown(...))`` reaches the book's pages as raw pipes). :func:`bind` hands a
+computed number to the chapter's prose, and :func:`sliders` shows a figure with sliders that the
+book renders at their first position.
 """
 
 from __future__ import annotations
 
+import contextlib
 import html
 import importlib.metadata
+import io
 import re
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from typing import Any
+from unittest import mock
 
 import numpy as np
 
@@ -102,3 +108,108 @@ def setup(seed: int = 0, quiet: bool = False) -> np.random.Generator:
         mode = " (fast mode: shortened demos)" if fast_mode() else ""
         print(f"{line}{mode}")
     return np.random.default_rng(seed)
+
+
+#: The MIME prefix under which MyST-NB's ``glue`` stores a value without showing it.
+GLUE_PREFIX = "application/papermill.record/"
+
+
+def bind(key: str, value: object, fmt: str = "") -> str:
+    """Hand a computed number to the chapter's prose, where ``{glue:text}`key``` shows it.
+
+    The book (MyST-NB) pastes the text into the sentence, so a sentence can never disagree with
+    the cell that computed its number; ``book/prose_numbers.py`` fails on any number typed into
+    prose instead. In JupyterLab the sentence shows the key, and the cell prints the value.
+    This writes the output MyST-NB's ``glue`` writes, so the course needs MyST-NB only to build
+    the book, not to run.
+
+    Parameters
+    ----------
+    key : str
+        The name the prose uses; unique within the notebook.
+    value : object
+        The number (or any value) to show.
+    fmt : str
+        A format specification applied to ``value`` here (``".2f"``, ``"+.1%"``); the prose
+        gets the formatted text, units included if ``value`` is already a string.
+
+    Returns
+    -------
+    str
+        The text the prose will show.
+    """
+    from IPython.display import display
+
+    text = format(value, fmt) if fmt else str(value)
+    # repr: MyST-NB literal-evaluates the stored text, so "1,234" would otherwise become a tuple.
+    display(
+        {GLUE_PREFIX + "text/plain": repr(text)},
+        raw=True,
+        metadata={"scrapbook": {"name": key, "mime_prefix": GLUE_PREFIX}},
+    )
+    return text
+
+
+def _first_frame(draw: Callable[..., None], values: dict[str, Any]) -> bytes:
+    """PNG of the figure ``draw`` makes at ``values`` (its ``plt.show`` held back)."""
+    import matplotlib.pyplot as plt
+
+    before = set(plt.get_fignums())
+    # A blank current figure, so that a draw that plots into "the current figure" draws here.
+    plt.figure()
+    # What draw prints goes to the widget in JupyterLab; printed here it would show twice.
+    with (
+        mock.patch.object(plt, "show", lambda *args, **kwargs: None),
+        contextlib.redirect_stdout(io.StringIO()),
+    ):
+        draw(**values)
+    new = [n for n in plt.get_fignums() if n not in before]
+    drawn = [n for n in new if plt.figure(n).get_axes()]
+    if not drawn:
+        for number in new:
+            plt.close(number)
+        raise ArgumentError(f"{draw.__name__} drew no figure; sliders() needs one to show")
+    buffer = io.BytesIO()
+    figure = plt.figure(drawn[-1])
+    figure.savefig(buffer, format="png", bbox_inches="tight")
+    for number in new:
+        plt.close(number)
+    return buffer.getvalue()
+
+
+def sliders(draw: Callable[..., None], **controls: Any) -> None:
+    """Show ``draw``'s figure with sliders: live in JupyterLab, at their first position in the book.
+
+    ``ipywidgets.interact`` alone leaves a static page empty (the figure lives in the widget's
+    state, which the book cannot run). This displays one output that carries both the live
+    widget and a PNG of the figure at the sliders' first values: JupyterLab shows the widget,
+    and the book, which is told to skip widget views (``book/_config.yml``), shows the PNG.
+
+    Parameters
+    ----------
+    draw : callable
+        Draws one figure from keyword arguments and calls ``plt.show()``.
+    **controls
+        One ``ipywidgets`` control per keyword argument of ``draw`` (their ``value`` is the
+        first position).
+    """
+    import base64
+
+    from IPython.display import Markdown, display
+    from ipywidgets import interactive
+
+    widget = interactive(draw, **controls)
+    first = {name: control.value for name, control in controls.items()}
+    bundle = widget._repr_mimebundle_()
+    bundle["image/png"] = base64.b64encode(_first_frame(draw, first)).decode("ascii")
+    bundle["text/plain"] = (
+        f"{draw.__name__}: sliders for {', '.join(controls)} (live in JupyterLab)"
+    )
+    display(bundle, raw=True)
+    names = ", ".join(f"`{name}`" for name in controls)
+    display(
+        Markdown(
+            f"*Sliders ({names}): live when the notebook runs in JupyterLab; a static page shows "
+            "the figure at their first position.*"
+        )
+    )

@@ -1,0 +1,71 @@
+"""The notebooks' helpers: bound numbers reach MyST-NB's glue as text, sliders carry a static
+figure of their first position."""
+
+from __future__ import annotations
+
+import base64
+
+import matplotlib
+
+matplotlib.use("Agg")
+
+import matplotlib.pyplot as plt  # noqa: E402
+import pytest  # noqa: E402
+
+from racing_lib.errors import ArgumentError  # noqa: E402
+from racing_lib.face import notebook  # noqa: E402
+
+
+@pytest.fixture
+def shown(monkeypatch):
+    """Everything the helpers display: (object, keyword arguments) per call."""
+    calls = []
+    monkeypatch.setattr("IPython.display.display", lambda obj, **kw: calls.append((obj, kw)))
+    return calls
+
+
+def test_bind_stores_the_formatted_text_where_myst_nb_glue_finds_it(shown):
+    from ast import literal_eval
+
+    assert notebook.bind("lap_s", 104.1634, ".2f") == "104.16"
+    assert notebook.bind("walls", "1,234") == "1,234"
+    (first, kw1), (second, _) = shown
+    assert kw1["raw"] and kw1["metadata"]["scrapbook"] == {
+        "name": "lap_s",
+        "mime_prefix": notebook.GLUE_PREFIX,
+    }
+    # MyST-NB strips the prefix and literal-evaluates text/plain: the prose gets the text as is.
+    assert literal_eval(first[notebook.GLUE_PREFIX + "text/plain"]) == "104.16"
+    assert literal_eval(second[notebook.GLUE_PREFIX + "text/plain"]) == "1,234"
+    # Nothing is shown in the notebook itself (every key carries the prefix).
+    assert all(k.startswith(notebook.GLUE_PREFIX) for k in first)
+
+
+def test_sliders_show_the_live_widget_and_a_png_of_the_first_position(shown):
+    from ipywidgets import FloatSlider
+
+    drawn = []
+
+    def curve(gain: float) -> None:
+        drawn.append(gain)
+        plt.plot([0, 1], [0, gain])
+        print("only in the widget")
+        plt.show()
+
+    plt.close("all")
+    notebook.sliders(curve, gain=FloatSlider(value=2.0, min=0.0, max=5.0))
+    bundle = shown[0][0]
+    assert "application/vnd.jupyter.widget-view+json" in bundle
+    assert base64.b64decode(bundle["image/png"]).startswith(b"\x89PNG")
+    assert drawn == [2.0, 2.0]  # once for the widget, once for the PNG, both at the first value
+    # The PNG's figure is closed, not shown again; one stays: the widget's (Agg's show keeps it
+    # open, a notebook's inline backend closes it).
+    assert len(plt.get_fignums()) == 1
+    assert "live" in shown[1][0].data and "`gain`" in shown[1][0].data
+
+
+def test_sliders_refuse_a_function_that_draws_nothing(shown):
+    from ipywidgets import IntSlider
+
+    with pytest.raises(ArgumentError, match="drew no figure"):
+        notebook.sliders(lambda n: None, n=IntSlider(value=1))
