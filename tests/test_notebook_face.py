@@ -69,3 +69,14 @@ def test_sliders_refuse_a_function_that_draws_nothing(shown):
 
     with pytest.raises(ArgumentError, match="drew no figure"):
         notebook.sliders(lambda n: None, n=IntSlider(value=1))
+
+
+def test_a_table_aligns_number_columns_right_and_text_columns_left():
+    table = notebook.Table(
+        ["row", "lap (s)", "gap", "verdict"],
+        [["main", "105.10", "+1.2 %", "agrees"], ["decoupled", "—", "-0.05 ± 0.1 s", "~ ties"]],
+    )
+    html = table._repr_html_()
+    assert table._numeric_columns() == [False, True, True, False]
+    assert '<th style="text-align:right">lap (s)</th>' in html
+    assert '<td style="text-align:left">agrees</td>' in html

@@ -27,6 +27,12 @@ from racing_lib.face.plotting import set_style
 
 _SOLVERS = ("numpy", "scipy", "casadi", "cvxpy", "osqp", "control", "cma")
 _CODE = re.compile(r"`([^`]+)`")
+#: Cells that hold no value (they do not decide how a column aligns).
+_BLANK = {"", "-", "–", "—", "n/a", "nan"}
+#: A table cell that states a number: an optional sign or mark, digits, then at most a unit.
+_NUMBER = re.compile(
+    r"^\s*[-+−±~≠<>]?\s*\d[\d.,]*\s*(?:[%a-zA-Z/^²°]{0,5}|±\s*[\d.]+\s*\w{0,3})\s*$"
+)
 
 
 class Table:
@@ -60,10 +66,28 @@ class Table:
     def _cell(text: str) -> str:
         return _CODE.sub(r"<code>\1</code>", html.escape(text))
 
+    def _numeric_columns(self) -> list[bool]:
+        """Per column, whether every non-empty body cell is a number (aligned right)."""
+        return [
+            any(row[i].strip() not in _BLANK for row in self.rows)
+            and all(_NUMBER.match(row[i]) for row in self.rows if row[i].strip() not in _BLANK)
+            for i in range(len(self.header))
+        ]
+
     def _repr_html_(self) -> str:
-        head = "".join(f"<th>{self._cell(h)}</th>" for h in self.header)
+        # Numbers align right so their digits line up; text aligns left to read.
+        align = ["right" if n else "left" for n in self._numeric_columns()]
+        head = "".join(
+            f'<th style="text-align:{a}">{self._cell(h)}</th>'
+            for h, a in zip(self.header, align, strict=True)
+        )
         body = "".join(
-            "<tr>" + "".join(f"<td>{self._cell(c)}</td>" for c in row) + "</tr>"
+            "<tr>"
+            + "".join(
+                f'<td style="text-align:{a}">{self._cell(c)}</td>'
+                for c, a in zip(row, align, strict=True)
+            )
+            + "</tr>"
             for row in self.rows
         )
         return f"<table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>"
