@@ -55,9 +55,11 @@ _NOT_PROSE = (
     re.compile(r"<[^>]+>"),
     re.compile(r"^\s*:[\w-]+:.*$", re.M),
 )
-#: A number as prose writes it (thousands separators and decimals), with the unit after it.
+#: A number as prose writes it (thousands separators, decimals, ranges), with the unit after it.
 _NUMBER = re.compile(
     r"(?<![\w.,/-])[-+−±]?(?P<digits>\d+(?:[,\u202f]\d{3})*(?:\.\d+)?)"
+    # a range ("10-12 m", "2–7 km") is one number: its first end has no unit of its own
+    r"(?:\s?[-–]\s?\d+(?:\.\d+)?)?"
     r"(?:\s?(?P<unit>%|km/h|km|m/s\^?2?|m/s²|ms|m|s|rad/s|rad|deg|°|×|x|g|kg|Hz|N)(?![\w]))?(?![\w])"
 )
 #: Words after which a number names a part of a text, not a quantity.

@@ -258,6 +258,8 @@ def _book_script(name: str):
     """The module of ``book/<name>.py`` (the book's scripts are not a package)."""
     spec = importlib.util.spec_from_file_location(name, BOOK / f"{name}.py")
     module = importlib.util.module_from_spec(spec)
+    # Registered first: a dataclass looks its module up while it is being defined.
+    sys.modules[spec.name] = module
     spec.loader.exec_module(module)
     return module
 
@@ -429,3 +431,78 @@ def test_the_book_takes_a_kept_run_instead_of_executing_the_notebook(tmp_path):
     cache = jupyter_cache.get_cache(str(tmp_path / "cache"))
     _, merged = cache.merge_match_into_notebook(nbformat.read(nb, as_version=4))
     assert merged.cells[0].outputs[0]["text"] == "as the tests ran it\n"
+
+
+# --- Every number in prose comes from a cell (book/prose_numbers.py) --------------------------
+
+
+def _chapter(cells: list[tuple[str, str]], fixed: dict[str, str] | None = None):
+    """A notebook of (kind, source) cells, with declared fixed numbers."""
+    import nbformat
+
+    nb = nbformat.v4.new_notebook()
+    make = {"md": nbformat.v4.new_markdown_cell, "code": nbformat.v4.new_code_cell}
+    nb.cells = [make[kind](source) for kind, source in cells]
+    if fixed is not None:
+        nb.metadata["racing_lab"] = {"fixed_numbers": fixed}
+    return nb
+
+
+def _check(tmp_path: Path, nb) -> list[str]:
+    import nbformat
+
+    path = tmp_path / "chapter.ipynb"
+    nbformat.write(nb, path)
+    return _book_script("prose_numbers").check_notebook(path)
+
+
+def test_every_number_in_the_chapters_prose_is_bound_to_a_cell_or_declared_fixed():
+    checker = _book_script("prose_numbers")
+    assert checker.CHAPTERS, "no chapter notebooks found"
+    problems = [p for path in checker.CHAPTERS for p in checker.check_notebook(path)]
+    assert not problems, "\n".join(problems)
+
+
+def test_the_prose_number_check_fails_on_an_unbound_number_in_a_real_chapter(tmp_path):
+    import nbformat
+
+    checker = _book_script("prose_numbers")
+    nb = nbformat.read(checker.CHAPTERS[2], as_version=4)
+    assert _check(tmp_path, nb) == []
+    prose = next(c for c in nb.cells if c.cell_type == "markdown")
+    prose.source += "\n\nThe plan's lap takes 104.16 s."
+    problems = _check(tmp_path, nb)
+    assert len(problems) == 1 and "'104.16 s'" in problems[0] and "lap takes" in problems[0]
+
+
+def test_the_prose_number_check_accepts_bound_declared_and_structural_numbers(tmp_path):
+    clean = _chapter(
+        [
+            ("code", 'bind("lap_s", 104.163, ".2f")'),
+            (
+                "md",
+                "## 3. Margins\n\nThe lap takes {glue:text}`lap_s` s (Eq. 5, section 3.2, claim "
+                "4.1, with 3 seeds), $v = 50$ m/s in math, `0.25` in code, the paper's 99.48 s, "
+                "and [a link](https://example.org/2305.07740).",
+            ),
+        ],
+        fixed={"99.48 s": "paper: the planned lap, Table I"},
+    )
+    assert _check(tmp_path, clean) == []
+
+
+@pytest.mark.parametrize(
+    ("cells", "fixed", "named"),
+    [
+        ([("md", "It brakes from 45 m/s.")], {}, "'45 m/s'"),
+        ([("md", "It is 16 % low.")], {}, "'16 %'"),
+        ([("md", "It took 371 iterations.")], {}, "'371'"),
+        ([("md", "The error is 0.071.")], {}, "'0.071'"),
+        ([("md", "The lap takes {glue:text}`lap_s` s.")], {}, "not bound by any code cell"),
+        ([("md", "A 2.5 s horizon.")], {"2.5 s": "because"}, "start it with one of"),
+        ([("md", "No numbers here.")], {"2.5 s": "setting: horizon"}, "no sentence uses it"),
+    ],
+)
+def test_the_prose_number_check_names_each_fault(tmp_path, cells, fixed, named):
+    problems = _check(tmp_path, _chapter(cells, fixed))
+    assert len(problems) == 1 and named in problems[0], problems

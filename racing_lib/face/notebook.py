@@ -138,7 +138,7 @@ def setup(seed: int = 0, quiet: bool = False) -> np.random.Generator:
 GLUE_PREFIX = "application/papermill.record/"
 
 
-def bind(key: str, value: object, fmt: str = "") -> str:
+def bind(key: str, value: object, fmt: str = "") -> None:
     """Hand a computed number to the chapter's prose, where ``{glue:text}`key``` shows it.
 
     The book (MyST-NB) pastes the text into the sentence, so a sentence can never disagree with
@@ -157,10 +157,7 @@ def bind(key: str, value: object, fmt: str = "") -> str:
         A format specification applied to ``value`` here (``".2f"``, ``"+.1%"``); the prose
         gets the formatted text, units included if ``value`` is already a string.
 
-    Returns
-    -------
-    str
-        The text the prose will show.
+    Nothing is returned, so a cell may end with a ``bind`` call without printing anything.
     """
     from IPython.display import display
 
@@ -171,7 +168,6 @@ def bind(key: str, value: object, fmt: str = "") -> str:
         raw=True,
         metadata={"scrapbook": {"name": key, "mime_prefix": GLUE_PREFIX}},
     )
-    return text
 
 
 def _first_frame(draw: Callable[..., None], values: dict[str, Any]) -> bytes:
