@@ -514,6 +514,132 @@ $w = v^2$, in which the dynamics are linear and the lap time convex.""",
 # --------------------------------------------------------------------------------------------------
 # Chapter 05
 
+CAPSTONE_MARKDOWN = """## Exercise 5.5 · Capstone: your QP drives a lap
+
+In exercise 5.4 you wrote a small tracking QP and solved it. Now build the coupled MPC's own QP,
+the one chapter 05's controller solves ten times a second, and let it drive a lap. At every
+control period the controller projects the car on its plan, linearizes the model along the
+heuristic trajectory of exercise 5.1 and hands your function `build_qp(step)` that period's
+numbers as a `racing_lib.control.mpc.StepQP`: $N = 25$ stages, $n = 6$ states
+$x = (v_x, v_y, r, e_\\psi, e_y, \\delta)$ (m/s, m/s, rad/s, rad, m, rad; $\\delta$ is the steering
+angle behind the actuator's lag of exercise 5.2) and $m = 2$ inputs $u = (\\delta_\\text{cmd}, a_x)$
+(rad, m/s$^2$).
+
+| field | shape | what it is |
+| --- | --- | --- |
+| `step.x0` | $(n,)$ | the state now, $x_0$ (measured) |
+| `step.A`, `step.B`, `step.d` | $(N, n, n)$, $(N, n, m)$, $(N, n)$ | the model $x_{k+1} = A_k x_k + B_k u_k + d_k$, $k = 0, \\dots, N-1$ |
+| `step.x_ref` | $(N, n)$ | the reference at stages $1, \\dots, N$ (row $k-1$ is stage $k$) |
+| `step.state_weights` | $(N, n)$ | the diagonal of $W$ at stages $1, \\dots, N$ |
+| `step.rate_weights` | $(m,)$ | the diagonal of $W_{\\Delta u}$ |
+| `step.rate_limits` | $(m,)$ | the largest change of each input per period (`inf`: none) |
+| `step.u_prev` | $(m,)$ | the input of the last period, $u_{-1}$ |
+| `step.u_min`, `step.u_max` | $(N, m)$ | the bounds of $u_0, \\dots, u_{N-1}$ |
+| `step.band_min`, `step.band_max` | $(N,)$ | the track's edges on $e_y$ (state `step.band_index` = 4) at stages $1, \\dots, N$, m |
+| `step.slack_linear`, `step.slack_quadratic` | float | $\\rho_1$ (1/m), $\\rho_2$ (1/m$^2$) |
+
+The QP is the library's (`racing_lib.control.mpc.qp_problem`):
+$$\\min\\; \\sum_{k=1}^{N} (x_k - x^\\text{ref}_k)^\\top W (x_k - x^\\text{ref}_k)
++ \\sum_{k=0}^{N-1} (u_k - u_{k-1})^\\top W_{\\Delta u} (u_k - u_{k-1})
++ \\sum_{k=1}^{N} \\big(\\rho_1 \\varepsilon_k + \\rho_2 \\varepsilon_k^2\\big)$$
+subject to the model for $k = 0, \\dots, N-1$; the soft band
+$e_{y,\\min,k} - \\varepsilon_k \\le e_{y,k} \\le e_{y,\\max,k} + \\varepsilon_k$ with $\\varepsilon_k \\ge 0$;
+the bounds $u_{\\min,k} \\le u_k \\le u_{\\max,k}$; and the steering's slew rate,
+$|u_k - u_{k-1}| \\le$ `rate_limits`. The band is soft so that the QP has a solution even when the
+car is already beyond it.
+
+Return it in OSQP's form, $\\min \\tfrac12 z^\\top P z + q^\\top z$ subject to $l \\le A z \\le u$, over
+$z = (x_1, \\dots, x_N, u_0, \\dots, u_{N-1}, \\varepsilon_1, \\dots, \\varepsilon_N)$ stage by stage:
+$x_k$ is `z[(k-1)*n : k*n]`, $u_k$ is `z[N*n + k*m : N*n + (k+1)*m]` and $\\varepsilon_k$ is
+`z[N*(n+m) + k-1]`. $P$ is symmetric (a NumPy array or a `scipy.sparse` matrix), the rows of $A$
+come in any order, and `np.inf` in $l$ or $u$ means no bound on that side. Two things to think
+about first: $x_0$ is not a variable, so where does $A_0 x_0$ go? And OSQP minimizes *half* of
+$z^\\top P z$.
+
+The library solves your matrices with OSQP at every period, as it solves its own, applies $u_0$
+and drives a flying lap of the figure-eight (808 m between walls, two 270° loops of 60 m radius)
+on its centerline plan. The check first solves your QP in three single periods and names what
+differs from the library's QP; then it drives the lap and grades it: finished, no wall touched, at
+most 1.5 m from the plan and 1.0 m/s off its speed on average (the library's own MPC: 1.09 m and
+0.64 m/s). The lap takes a few seconds."""
+
+# The start of exercise 5.5's function (template and solution): the sizes and the blocks of z.
+CAPSTONE_START = """    N, n, m = step.B.shape  # 25 stages, 6 states, 2 inputs
+    nx, nu = N * n, N * m
+    nz = nx + nu + N  # z = [x_1..x_N, u_0..u_{N-1}, eps_1..eps_N], stage by stage
+    X, U, E = slice(0, nx), slice(nx, nx + nu), slice(nx + nu, nz)  # the three blocks of z
+"""
+
+CAPSTONE_SOLUTION = """
+    # Cost 1/2 z'Pz + q'z. w (x - x_ref)^2 = w x^2 - 2 w x_ref x + const: 2 w on P's diagonal.
+    P = np.zeros((nz, nz))
+    q = np.zeros(nz)
+    P[X, X] = np.diag(2.0 * step.state_weights.ravel())
+    q[X] = -2.0 * (step.state_weights * step.x_ref).ravel()
+    # Input changes: (D u)_k = u_k - u_{k-1}, and u_0 alone at k = 0 (u_prev moves into q).
+    D = np.eye(nu) - np.eye(nu, k=-m)
+    P[U, U] = 2.0 * D.T @ np.diag(np.tile(step.rate_weights, N)) @ D
+    q[nx : nx + m] = -2.0 * step.rate_weights * step.u_prev
+    # The band's slack: rho_1 eps + rho_2 eps^2.
+    P[E, E] = 2.0 * step.slack_quadratic * np.eye(N)
+    q[E] = step.slack_linear
+
+    # Model: x_{k+1} - A_k x_k - B_k u_k = d_k. x_0 is measured, so A_0 x_0 joins d_0.
+    model = np.zeros((nx, nz))
+    model[:, X] = np.eye(nx)
+    for k in range(N):
+        rows = slice(k * n, (k + 1) * n)
+        if k > 0:
+            model[rows, (k - 1) * n : k * n] = -step.A[k]
+        model[rows, nx + k * m : nx + (k + 1) * m] = -step.B[k]
+    rhs = step.d.copy()
+    rhs[0] += step.A[0] @ step.x0
+    rhs = rhs.ravel()
+    # The soft band: band_min - eps <= e_y <= band_max + eps, and eps >= 0.
+    e_y = np.zeros((N, nz))
+    e_y[np.arange(N), np.arange(N) * n + step.band_index] = 1.0
+    eps = np.zeros((N, nz))
+    eps[:, E] = np.eye(N)
+    # Inputs: their bounds, and changes of at most rate_limits per period (from u_prev at k = 0).
+    inputs = np.zeros((nu, nz))
+    inputs[:, U] = np.eye(nu)
+    changes = np.zeros((nu, nz))
+    changes[:, U] = D
+    limit = np.tile(step.rate_limits, N)
+    first = np.zeros(nu)
+    first[:m] = step.u_prev
+
+    inf = np.full(N, np.inf)
+    A = np.vstack([model, e_y + eps, e_y - eps, eps, inputs, changes])
+    l = np.concatenate([rhs, step.band_min, -inf, np.zeros(N), step.u_min.ravel(), first - limit])
+    u = np.concatenate([rhs, inf, step.band_max, inf, step.u_max.ravel(), first + limit])
+    return P, q, A, l, u"""
+
+CAPSTONE_AFTER = """# The gap to the plan along the lap: your QP against the library's (a few seconds).
+import matplotlib.pyplot as plt
+
+fig, ax = plt.subplots(figsize=(8, 3))
+for label, builder in (("the library's QP", None), ("your QP", build_qp)):
+    try:
+        run = drive_capstone_lap(builder)
+    except NotDone:
+        print("(build_qp is not written yet: only the library's lap is shown)")
+        continue
+    except Wrong as mistake:  # matrices the library cannot read: the check says more
+        print(f"{label}: {mistake}")
+        continue
+    if run.result is None:
+        print(f"{label}: the car touched the wall at s = {run.wall[1]:.0f} m")
+        continue
+    log, m = run.result.log, run.result.metrics
+    print(
+        f"{label}: lap {m.lap_time_s:.2f} s, |e_y| max {m.ey_max_m:.2f} m, mean "
+        f"{m.ey_mae_m:.2f} m, |v_x - v_ref| mean {m.vx_mae_mps:.2f} m/s"
+    )
+    ax.plot(log.t, log.ey, label=label)
+ax.set(xlabel="time since the start [s]", ylabel="e_y [m]")
+ax.legend();"""
+
 CH05 = Chapter(
     name="05_mpc",
     title="Exercises 05 · The coupled MPC",
@@ -522,7 +648,8 @@ along a *heuristic trajectory* and solves one QP per control period. Here you wr
 the discrete model of the steering actuator the QP carries, and the last step from the planned
 acceleration to a pedal position. Then you write a tracking MPC's QP yourself, for the lateral
 errors of a car. The checks compare with `racing_lib.control.mpc` and `racing_lib.model`, and
-your QP's commands with the optimum found by another method.""",
+your QP's commands with the optimum found by another method. Last, the capstone: you build the
+coupled MPC's own QP from its linearization, and it drives a lap.""",
     imports="""import math
 
 import cvxpy as cp
@@ -532,10 +659,13 @@ import racing_lib.face.notebook
 from racing_lib.grading.ch05 import (
     check_heuristic_trajectory,
     check_lateral_mpc,
+    check_mpc_lap,
     check_pedal_inversion,
     check_steering_lag,
+    drive_capstone_lap,
     lateral_mpc_problem,
-)""",
+)
+from racing_lib.grading.grader import NotDone, Wrong""",
     exercises=[
         Exercise(
             markdown="""## Exercise 5.1 · The heuristic trajectory
@@ -637,6 +767,17 @@ for k, u in enumerate(delta):
 print("first commands [rad]:", np.round(delta[:5], 4))
 print("predicted e_y [m]:   ", np.round(np.array(x)[:6, 0], 3))""",
         ),
+        Exercise(
+            markdown=CAPSTONE_MARKDOWN,
+            header='''def build_qp(step):
+    """OSQP's (P, q, A, l, u) of the coupled MPC's QP for one control period (a StepQP)."""''',
+            template=CAPSTONE_START
+            + """    # YOUR CODE HERE: the cost (P, q), then the rows of A with their sides l and u
+    raise NotImplementedError""",
+            solution=CAPSTONE_START + CAPSTONE_SOLUTION,
+            check="check_mpc_lap(build_qp)",
+            after=CAPSTONE_AFTER,
+        ),
     ],
 )
 
@@ -664,6 +805,43 @@ CMA_CONSTANTS = """    rng = np.random.default_rng(seed)
     used = 1
 """
 
+TUNING_MARKDOWN = """## Exercise 6.4 · Tuning the MPC with your CMA-ES
+
+Now put the pieces together: your `cma_es` (exercise 6.3) searches the logarithms of two MPC
+weights, your `to_params` (exercise 6.2) turns its points into weights, and each candidate is
+scored by closed-loop driving. The weights are `w_ey`, the price of the lateral error
+(1/m$^2$), and `w_ddelta`, the price of a steering change (1/rad$^2$): tracking against
+smoothness. `space = tuning_space()` starts at the MPC's defaults (5 and 100).
+
+`evaluate(weights, seed)` drives the coupled MPC with `weights` (a dict, the other weights at
+their defaults) and returns the objective of exercise 6.1 (lower is better). The car's friction and
+actuation noise differ from seed to seed, so the objective of a candidate is its mean over all
+the `seeds` given (1, 2 and 3), each used once. `budget` counts evaluations of that mean, as
+`cma_es` counts evaluations of `f`: 13, the start and two generations of 6 candidates.
+
+To keep the check within seconds the runs are short, and that changes the objective honestly:
+each run is 8 s of the figure-eight of exercise 5.5 (from 60 m before the crossing, on the plan,
+along the straight and into the right-hand loop) instead of a whole lap of the expressway, and
+the objective of exercise 6.1 is taken over that fixed window: 39 runs of 0.07 s each instead of
+39 laps of about 0.9 s. Weights tuned on 8 s of one loop are not tuned for a circuit: chapter 06
+tunes on whole laps, hundreds of them. The check verifies that your loop scored every candidate
+on every seed, spent its budget (not more), and returns weights that score no worse than the
+start and than any candidate it scored."""
+
+TUNING_AFTER = """# The objective of the start and of your tuned weights, seed by seed.
+space = tuning_space()
+start = dict(zip(space.names, space.initial, strict=True))
+try:
+    tuned = tune_mpc(stretch_objective, space, TUNING_SEEDS, TUNING_BUDGET)
+except NotImplementedError:
+    tuned = None
+    print("(tune_mpc is not written yet)")
+if tuned is not None:
+    for name, weights in (("start", start), ("tuned", tuned)):
+        scores = [stretch_objective(weights, seed) for seed in TUNING_SEEDS]
+        shown = ", ".join(f"{k} = {v:.3g}" for k, v in weights.items())
+        print(f"{name} ({shown}): J = " + ", ".join(f"{j:.3f}" for j in scores))"""
+
 CH06 = Chapter(
     name="06_tuning",
     title="Exercises 06 · Tuning with CMA-ES",
@@ -671,8 +849,9 @@ CH06 = Chapter(
 lap. Here you write that score, the paper's tuning objective, and the map from CMA-ES's search
 space (logarithms of the weights) to the weights themselves. The checks compare with
 `racing_lib.experiments.tuning` on laps made up for the exercise (`racing_lib.grading.ch06.synthetic_lap`), so
-no simulation is needed. Last, you write CMA-ES itself and watch it solve a problem that a search
-without its covariance update cannot.""",
+no simulation is needed. Then you write CMA-ES itself and watch it solve a problem that a search
+without its covariance update cannot. Last, your CMA-ES tunes two of the MPC's weights on short
+closed-loop runs of the car.""",
     imports="""import math
 
 import numpy as np
@@ -680,11 +859,16 @@ import numpy as np
 import racing_lib.face.notebook
 from racing_lib.grading.ch06 import (
     CMA_BUDGET,
+    TUNING_BUDGET,
+    TUNING_SEEDS,
     check_cma_es,
+    check_mpc_tuning,
     check_search_space,
     check_tuning_objective,
     rotated_ellipsoid,
+    stretch_objective,
     synthetic_lap,
+    tuning_space,
 )""",
     exercises=[
         Exercise(
@@ -789,6 +973,20 @@ for budget in (300, 1000, CMA_BUDGET):
         print("(cma_es is not written yet)")
         break
     print(f"{budget:5d} evaluations: f = {f(x):.2e}")""",
+        ),
+        Exercise(
+            markdown=TUNING_MARKDOWN,
+            header='''def tune_mpc(evaluate, space, seeds, budget):
+    """Weights {name: weight} tuned by your cma_es on the mean of evaluate over the seeds."""''',
+            solution="""
+    def f(x):  # the objective of a point of log10 space: the mean over the seeds
+        weights = to_params(space, x)
+        return float(np.mean([evaluate(weights, seed) for seed in seeds]))
+
+    x_best = cma_es(f, space.x0(), 0.5, budget, 0)  # sigma0 = 0.5: steps of about 3x
+    return to_params(space, x_best)""",
+            check="check_mpc_tuning(tune_mpc)",
+            after=TUNING_AFTER,
         ),
     ],
 )

@@ -580,6 +580,65 @@ def _mpc_library(problem):
     return QP(problem).solve()
 
 
+def _mpc_qp(step, *, x0=True, d_sign=1.0, blocks=-1.0, transpose=False, soft=True, rate_limit=True,
+        from_zero=False, two=2.0, x0_variable=False, eps_rows=True, lower=False,
+        input_major=False, bounds=True, slack_price=True, band_state=None):  # fmt: skip
+    """Exercise 5.5's QP in OSQP's form, as the solution builds it, with one mistake."""
+    N, n, m = step.B.shape
+    nx, nu = N * n, N * m
+    nz = nx + nu + N
+    X, U, E = slice(0, nx), slice(nx, nx + nu), slice(nx + nu, nz)
+    P, q = np.zeros((nz, nz)), np.zeros(nz)
+    P[X, X] = np.diag(two * step.state_weights.ravel())
+    q[X] = -2.0 * (step.state_weights * step.x_ref).ravel()
+    D = np.eye(nu) - np.eye(nu, k=-m)
+    P[U, U] = two * D.T @ np.diag(np.tile(step.rate_weights, N)) @ D
+    q[nx : nx + m] = 0.0 if from_zero else -2.0 * step.rate_weights * step.u_prev
+    P[E, E] = two * step.slack_quadratic * np.eye(N)
+    q[E] = step.slack_linear if slack_price else 0.0
+    A_k = np.transpose(step.A, (0, 2, 1)) if transpose else step.A
+    model = np.zeros((nx, nz))
+    model[:, X] = np.eye(nx)
+    for k in range(N):
+        if k > 0:
+            model[k * n : (k + 1) * n, (k - 1) * n : k * n] = blocks * A_k[k]
+        model[k * n : (k + 1) * n, nx + k * m : nx + (k + 1) * m] = blocks * step.B[k]
+    rhs = d_sign * step.d.copy()
+    rhs[0] -= blocks * A_k[0] @ step.x0 if x0 else 0.0
+    rhs = rhs.ravel()
+    e_y = np.zeros((N, nz))
+    e_y[
+        np.arange(N), np.arange(N) * n + (step.band_index if band_state is None else band_state)
+    ] = 1
+    eps = np.zeros((N, nz))
+    eps[:, E] = np.eye(N)
+    inputs, changes = np.zeros((nu, nz)), np.zeros((nu, nz))
+    inputs[:, U], changes[:, U] = np.eye(nu), D
+    limit, first = np.tile(step.rate_limits, N), np.zeros(nu)
+    first[:m] = step.u_prev
+    inf = np.full(N, np.inf)
+    rows = [(model, rhs, rhs), (e_y + soft * eps, step.band_min, inf),
+            (e_y - soft * eps, -inf, step.band_max)]  # fmt: skip
+    rows += [(eps, np.zeros(N), inf)] if eps_rows else []
+    rows += [(inputs, step.u_min.ravel(), step.u_max.ravel())] if bounds else []
+    rows += [(changes, first - limit, first + limit)] if rate_limit else []
+    A = np.vstack([r[0] for r in rows])
+    lo, up = np.concatenate([r[1] for r in rows]), np.concatenate([r[2] for r in rows])
+    if input_major:  # the inputs' block ordered input by input: all steering, then all a_x
+        order = np.arange(nz)
+        order[U] = nx + np.arange(nu).reshape(N, m).T.ravel()
+        P, q, A = P[np.ix_(order, order)], q[order], A[:, order]
+    if x0_variable:  # room for x_0 at the front of z
+        P, q, A = np.pad(P, ((n, 0), (n, 0))), np.pad(q, (n, 0)), np.pad(A, ((0, 0), (n, 0)))
+    return (np.tril(P) if lower else P), q, A, lo, up
+
+
+def _capstone_library(step):
+    from racing_lib.control.mpc import TrackingQP as QP
+
+    return QP(step).solve()
+
+
 CH05 = [
     ("5.1 N values of lambda", ch05.check_heuristic_trajectory, _h_short, ["ValueError"]),
     ("5.1 lambda rising", ch05.check_heuristic_trajectory, _h_rising, ["k = 0", "car's own state"]),
@@ -623,6 +682,38 @@ CH05 = [
      lambda p: _mpc(p, rate=False), ["steering-rate term"]),
     ("5.4 the library QP under another name", ch05.check_lateral_mpc, _mpc_library,
      ["TrackingQP"]),
+    ("5.5 x_0 left out of the model rows", ch05.check_mpc_lap, lambda st: _mpc_qp(st, x0=False),
+     ["x_0 is measured", "A_0 x_0"]),
+    ("5.5 d_k with the wrong sign", ch05.check_mpc_lap, lambda st: _mpc_qp(st, d_sign=-1.0),
+     ["d_k with the wrong sign"]),
+    ("5.5 +A_k and +B_k in the model rows", ch05.check_mpc_lap, lambda st: _mpc_qp(st, blocks=1.0),
+     ["+A_k and +B_k", "-A_k, -B_k"]),
+    ("5.5 A_k transposed", ch05.check_mpc_lap, lambda st: _mpc_qp(st, transpose=True),
+     ["A_k transposed"]),
+    ("5.5 a hard band", ch05.check_mpc_lap, lambda st: _mpc_qp(st, soft=False),
+     ["beyond the band", "no solution", "soften it"]),
+    ("5.5 no slew-rate limit", ch05.check_mpc_lap, lambda st: _mpc_qp(st, rate_limit=False),
+     ["slew rate allows 0.120 rad per period"]),
+    ("5.5 first rate term from zero", ch05.check_mpc_lap, lambda st: _mpc_qp(st, from_zero=True),
+     ["u_0 - u_prev", "-2 W_du u_prev"]),
+    ("5.5 P without OSQP's factor 2", ch05.check_mpc_lap, lambda st: _mpc_qp(st, two=1.0),
+     ["1/2 z'Pz", "2 w on P's diagonal"]),
+    ("5.5 x_0 among the variables", ch05.check_mpc_lap, lambda st: _mpc_qp(st, x0_variable=True),
+     ["231 variables", "x_0 is measured"]),
+    ("5.5 slack without eps >= 0", ch05.check_mpc_lap, lambda st: _mpc_qp(st, eps_rows=False),
+     ["negative slack", "eps_k >= 0"]),
+    ("5.5 only P's lower triangle", ch05.check_mpc_lap, lambda st: _mpc_qp(st, lower=True),
+     ["lower triangle", "upper one"]),
+    ("5.5 inputs ordered input by input", ch05.check_mpc_lap,
+     lambda st: _mpc_qp(st, input_major=True), ["input by input", "stage by stage"]),
+    ("5.5 no input bounds", ch05.check_mpc_lap, lambda st: _mpc_qp(st, bounds=False),
+     ["a_x", "outside its bounds"]),
+    ("5.5 the slack without its price rho_1", ch05.check_mpc_lap,
+     lambda st: _mpc_qp(st, slack_price=False), ["slack_linear"]),
+    ("5.5 the band on e_psi", ch05.check_mpc_lap, lambda st: _mpc_qp(st, band_state=3),
+     ["beyond the band", "band_index"]),
+    ("5.5 the library's QP under another name", ch05.check_mpc_lap, _capstone_library,
+     ["TrackingQP", "yourself"]),
 ]  # fmt: skip
 
 
@@ -668,6 +759,28 @@ def _cma_library(f, x0, sigma0, budget, seed):
     return search(f, x0, sigma0, budget, seed)
 
 
+def _tune(evaluate, space, seeds, budget, *, use=None, params=None, scale=1.0, sign=1.0,
+          give="best"):  # fmt: skip
+    """Exercise 6.4 as the solution writes it, with one mistake."""
+    params = params or S6["to_params"]
+    last = {}
+
+    def f(x):
+        weights = params(space, x)
+        last["x"] = np.array(x, dtype=float)
+        return sign * float(np.mean([evaluate(weights, s) for s in (use or tuple)(seeds)]))
+
+    x_best = S6["cma_es"](f, space.x0(), 0.5, int(budget * scale), 0)
+    chosen = {"best": x_best, "last": last.get("x"), "start": space.x0()}.get(give, x_best)
+    return x_best if give == "point" else S6["to_params"](space, chosen)
+
+
+def _tune_library(evaluate, space, seeds, budget):
+    from racing_lib.experiments.tuning import tune_weights as tune_them
+
+    return tune_them(evaluate, seeds)
+
+
 CH06 = [
     ("6.1 the run-up included", ch06.check_tuning_objective, _obj_all_steps,
      ["only the steps of the lap"]),
@@ -698,6 +811,27 @@ CH06 = [
     ("6.3 one generation over the budget", ch06.check_cma_es, _cma_off_by_one, ["the budget is"]),
     ("6.3 the library's tuner under another name", ch06.check_cma_es, _cma_library,
      ["tune", "yourself"]),
+    ("6.4 the first seed only", ch06.check_mpc_tuning,
+     lambda *a: _tune(*a, use=lambda seeds: seeds[:1]), ["on the seeds [1]", "all the seeds"]),
+    ("6.4 seeds of its own", ch06.check_mpc_tuning,
+     lambda *a: _tune(*a, use=lambda seeds: range(len(seeds))), ["seed 0", "the seeds given"]),
+    ("6.4 the log10 point as weights", ch06.check_mpc_tuning,
+     lambda *a: _tune(*a, params=lambda space, x: dict(zip(space.names, x, strict=True))),
+     ["log10 of the starting weights", "to_params"]),
+    ("6.4 budget times the seeds", ch06.check_mpc_tuning, lambda *a: _tune(*a, scale=3.0),
+     ["the budget is 13", "not single runs"]),
+    ("6.4 budget over the seeds", ch06.check_mpc_tuning, lambda *a: _tune(*a, scale=1 / 3),
+     ["only 1 candidate", "not single runs"]),
+    ("6.4 maximized", ch06.check_mpc_tuning, lambda *a: _tune(*a, sign=-1.0),
+     ["worst candidate", "CMA-ES minimizes"]),
+    ("6.4 returns the log10 point", ch06.check_mpc_tuning, lambda *a: _tune(*a, give="point"),
+     ["log10 space", "to_params(space, x_best)"]),
+    ("6.4 returns the last candidate", ch06.check_mpc_tuning, lambda *a: _tune(*a, give="last"),
+     ["not the last one"]),
+    ("6.4 returns the start", ch06.check_mpc_tuning, lambda *a: _tune(*a, give="start"),
+     ["starting weights", "not the one it started from"]),
+    ("6.4 the library's tuner under another name", ch06.check_mpc_tuning, _tune_library,
+     ["tune_weights", "yourself"]),
 ]  # fmt: skip
 
 CASES = CH01 + CH02 + CH03 + CH04 + CH05 + CH06

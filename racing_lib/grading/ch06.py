@@ -7,17 +7,38 @@ Exercise notebook: ``exercises/06_tuning.ipynb``. Every check compares the reade
 * 6.2 :func:`check_search_space`: from a CMA-ES point in log10 space to the MPC weights.
 * 6.3 :func:`check_cma_es`: a CMA-ES loop of the reader's own, on an ill-conditioned, rotated
   ellipsoid that a search without covariance adaptation cannot solve on the same budget.
+* 6.4 :func:`check_mpc_tuning`: the reader's CMA-ES tunes two MPC weights on a short closed-loop
+  objective over a few seeds (:func:`stretch_objective`); the tuned weights must score no worse
+  than the start, the search must spend its budget and score every candidate on every seed.
 """
 
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable
+import functools
+import math
+from collections.abc import Callable, Mapping, Sequence
 
 import numpy as np
 
-from racing_lib.experiments.lap import LapLog, LapMetrics
-from racing_lib.experiments.tuning import W_S, W_T, mpc_weight_space, tuning_objective
+from racing_lib.experiments.lap import (
+    LapLog,
+    LapMetrics,
+    LapSpec,
+    make_car,
+    make_controller,
+    run_lap,
+)
+from racing_lib.experiments.tuning import (
+    MPC_WEIGHT_BOX,
+    W_S,
+    W_T,
+    evaluate_weights,
+    mpc_weight_space,
+    tune_weights,
+    tuning_objective,
+)
+from racing_lib.grading.ch05 import capstone_lap
 from racing_lib.grading.grader import (
     CheckResult,
     Wrong,
@@ -30,14 +51,20 @@ from racing_lib.grading.grader import (
     refuse_library,
 )
 from racing_lib.optim import cmaes as library_cmaes
+from racing_lib.optim.cmaes import SearchSpace
 
 __all__ = [
     "CMA_BUDGET",
+    "TUNING_BUDGET",
+    "TUNING_SEEDS",
     "check_cma_es",
+    "check_mpc_tuning",
     "check_search_space",
     "check_tuning_objective",
     "rotated_ellipsoid",
+    "stretch_objective",
     "synthetic_lap",
+    "tuning_space",
 ]
 
 _LENGTH = 4392.9  # [m] track length of the synthetic laps (about the expressway's)
@@ -281,3 +308,265 @@ def check_cma_es(cma_es) -> CheckResult:
         )
 
     return grade("6.3 A CMA-ES loop", body, weight=3.0)
+
+
+# --------------------------------------------------------------------------------------------------
+# 6.4 Tuning the MPC with the reader's CMA-ES
+
+#: Seeds of the car's per-trial randomness (friction, actuation noise) the weights of exercise
+#: 6.4 are tuned on: the objective of a candidate is its mean over them. Not 0, 1, 2, so that a
+#: loop that makes up its own seeds (``range(len(seeds))``) shows.
+TUNING_SEEDS = (1, 2, 3)
+#: Evaluations of the mean objective the reader's search may spend in exercise 6.4: the start
+#: and two generations of 6 candidates (CMA-ES's default population for two parameters), each
+#: scored on the three seeds: 39 closed-loop runs of 8 s, about 3 s in all.
+TUNING_BUDGET = 13
+#: The MPC weights tuned in exercise 6.4: the lateral error's and the steering rate's, the pair
+#: that trades tracking against smoothness.
+_TUNED = ("w_ey", "w_ddelta")
+#: Simulated time of one run of :func:`stretch_objective`, s, and where it starts: this far
+#: before the figure-eight's crossing, on the plan, so that the run covers the straight and the
+#: entry of the right-hand loop.
+_STRETCH_SECONDS = 8.0
+_STRETCH_RUN_UP = 60.0
+
+
+def tuning_space() -> SearchSpace:
+    """The search space of exercise 6.4: ``w_ey`` and ``w_ddelta`` from the MPC's defaults.
+
+    In log10 space (:class:`~racing_lib.optim.cmaes.SearchSpace`), inside the library's box for
+    every MPC weight (1e-2 .. 1e4).
+    """
+    start = mpc_weight_space()
+    lo, hi = MPC_WEIGHT_BOX
+    return SearchSpace.from_bounds(
+        {name: (lo, start.initial[start.names.index(name)], hi) for name in _TUNED}
+    )
+
+
+@functools.lru_cache(maxsize=256)
+def _stretch(weights: tuple[tuple[str, float], ...], seed: int) -> float:
+    track, plan = capstone_lap()
+    spec = LapSpec(track=track, trajectory=plan, controller="coupled-mpc", weights=dict(weights),
+                   run_up=_STRETCH_RUN_UP)  # fmt: skip
+    car = make_car(spec)
+    result = run_lap(car, make_controller(spec), plan, track=track, seed=seed,
+                     max_time=_STRETCH_SECONDS)  # fmt: skip
+    # The lap objective over the whole window: every step counts, the collisions are the car's.
+    window = dataclasses.replace(result.log, in_lap=np.ones(result.log.t.size, dtype=bool))
+    metrics = dataclasses.replace(result.metrics, completed=True,
+                                  wall_contact_time_s=car.wall_contact_time,
+                                  offtrack_time_s=car.offtrack_time)  # fmt: skip
+    return tuning_objective(window, metrics, W_T, W_S, track_length=track.length)
+
+
+def stretch_objective(weights: Mapping[str, float], seed: int) -> float:
+    """The tuning objective of exercise 6.4: a short closed-loop run of the coupled MPC.
+
+    The objective of exercise 6.1 (:func:`racing_lib.experiments.tuning.tuning_objective`, lower
+    is better), over a fixed 8 s window instead of a lap: the coupled MPC with ``weights`` (the
+    others at their defaults) drives the figure-eight of exercise 5.5 from 60 m before the
+    crossing, on the plan, along the straight and into the right-hand loop. Every step of the
+    window counts; with a fixed duration the distance term rewards speed. A whole lap of the
+    expressway costs about a dozen times more (0.9 s against 0.07 s, measured): 35 s for the 39
+    runs the check scores, against 3 s.
+
+    Parameters
+    ----------
+    weights : mapping
+        MPC weights by ``MPCSettings`` name (``w_ey`` in 1/m^2, ``w_ddelta`` in 1/rad^2, ...).
+    seed : int
+        Seed of the car's friction variation and actuation noise.
+
+    Returns
+    -------
+    float
+        The objective (dimensionless); the same weights and seed always give the same value.
+    """
+    key = tuple(sorted((str(k), float(v)) for k, v in weights.items()))
+    return _stretch(key, int(seed))
+
+
+class _CountingObjective:
+    """:func:`stretch_objective` as the reader's loop sees it, recording every call.
+
+    A call it cannot score (not a dict of the space's weights, a seed not given) records the
+    first such problem and returns a poor score: a :class:`Wrong` raised inside the reader's
+    function would be reported as a crash of their code.
+    """
+
+    def __init__(self, space: SearchSpace, seeds: Sequence[int], budget: int) -> None:
+        self.space, self.seeds, self.budget = space, tuple(seeds), int(budget)
+        self.calls: list[tuple[tuple[float, ...], int, float]] = []
+        #: Every candidate the loop asked for, also those beyond the budget (not driven).
+        self.candidates: set[tuple[float, ...]] = set()
+        self.problem: Wrong | None = None
+
+    def _refuse(self, message: str) -> float:
+        if self.problem is None:
+            self.problem = Wrong(message)
+        return 3000.0  # the library's score of a failed evaluation
+
+    def __call__(self, weights: object, seed: object) -> float:
+        if self.problem is not None:
+            return 3000.0  # the verdict is decided: no more driving
+        names = self.space.names
+        if not isinstance(weights, Mapping) or set(weights) != set(names):
+            shown = dict(weights) if isinstance(weights, Mapping) else np.asarray(weights).round(3)
+            return self._refuse(
+                f"your loop called evaluate({shown}, ...); it takes the weights as a dict "
+                f"with the keys {list(names)}: turn a CMA-ES point x into weights with "
+                "to_params(space, x)."
+            )
+        values = tuple(float(weights[n]) for n in names)
+        if not all(math.isfinite(v) and v > 0 for v in values):
+            return self._refuse(f"your loop called evaluate with the weights "
+                                f"{_shown(self.space, values)}: weights are positive (10^x of "
+                                "the CMA-ES point).")  # fmt: skip
+        log_start = np.round(self.space.x0(), 9)
+        if np.allclose(values, log_start) and not np.allclose(values, self.space.initial):
+            return self._refuse(
+                f"your loop called evaluate with {_shown(self.space, values)}: those are log10 "
+                f"of the starting weights ({_shown(self.space, self.space.initial)}). CMA-ES "
+                "searches log10 space; turn its point into weights with to_params(space, x)."
+            )
+        if seed not in self.seeds:
+            return self._refuse(
+                f"your loop scored a candidate on seed {seed!r}; the seeds to tune on are "
+                f"{self.seeds}: use the seeds given."
+            )
+        self.candidates.add(values)
+        if len(self.candidates) > self.budget:
+            # Beyond the budget the verdict is decided: say so without driving (a loop that spends
+            # three times its budget would otherwise take 20 s).
+            return 3000.0
+        value = stretch_objective(dict(zip(names, values, strict=True)), int(seed))
+        self.calls.append((values, int(seed), value))
+        return value
+
+    def mean(self, values: tuple[float, ...]) -> float:
+        """The objective of weights ``values`` (in the space's order) over the seeds."""
+        weights = dict(zip(self.space.names, values, strict=True))
+        return float(np.mean([stretch_objective(weights, seed) for seed in self.seeds]))
+
+
+def _check_spending(evaluate: _CountingObjective, lam: int) -> dict:
+    """Every candidate scored on every seed once, within the budget; returns {candidate: J}."""
+    if evaluate.problem is not None:
+        raise evaluate.problem
+    budget = evaluate.budget
+    if len(evaluate.candidates) > budget:
+        raise Wrong(f"your search scored {len(evaluate.candidates)} candidates (or more); the "
+                    f"budget is {budget} evaluations of the mean objective. Pass the budget to "
+                    "cma_es as it is: it counts evaluations of f, each one the mean over the "
+                    "seeds, not single runs.")  # fmt: skip
+    seeds_of: dict[tuple[float, ...], list[int]] = {}
+    for values, seed, _ in evaluate.calls:
+        seeds_of.setdefault(values, []).append(seed)
+    for values, used in seeds_of.items():
+        if sorted(used) != sorted(evaluate.seeds):
+            raise Wrong(
+                f"your loop scored the candidate ({_shown(evaluate.space, values)}) on the seeds "
+                f"{sorted(used)}; the "
+                f"objective of a candidate is its mean over all the seeds {evaluate.seeds}, "
+                "each once: weights tuned on one seed are tuned to its luck (its friction, its "
+                "noise)."
+            )
+    n = len(seeds_of)
+    if n < budget - lam + 1:
+        raise Wrong(f"your search scored only {n} candidate(s) of its budget of {budget}: pass the "
+                    "budget to cma_es as it is (it counts evaluations of f, the mean over the "
+                    "seeds, not single runs).")  # fmt: skip
+    return {values: evaluate.mean(values) for values in seeds_of}
+
+
+def _shown(space: SearchSpace, values: Sequence[float]) -> str:
+    """Weights in words: ``w_ey = 5, w_ddelta = 100``."""
+    return ", ".join(f"{n} = {float(v):.4g}" for n, v in zip(space.names, values, strict=True))
+
+
+def _judge_tuned(
+    evaluate: _CountingObjective, scores: Mapping[tuple[float, ...], float], tuned: tuple
+) -> tuple[float, float]:
+    """``(J of the tuned weights, J of the start)`` over the seeds, when the tuned are the best.
+
+    Raises :class:`Wrong`, with the likely reason, when they score worse than the start or than
+    the best candidate the search scored.
+    """
+    start = evaluate.mean(tuple(evaluate.space.initial))
+    value = scores.get(tuned)
+    scored = value is not None
+    if not scored:
+        value = evaluate.mean(tuned) if all(v > 0 for v in tuned) else math.inf
+    best_seen = min(scores.values(), default=start)
+    if value <= min(start, best_seen) + 1e-9:
+        return value, start
+    shown = _shown(evaluate.space, tuned)
+    msg = (f"your tuned weights ({shown}) score J = {value:.4f} over the seeds; the start scores "
+           f"{start:.4f} and the best candidate your search scored {best_seen:.4f}.")  # fmt: skip
+    if scored and len(scores) > 2 and value >= max(scores.values()) - 1e-9:
+        raise Wrong(
+            msg + " They are the worst candidate it scored: CMA-ES minimizes, and J is "
+            "lower for better weights; does your f return +J, the mean itself?"
+        )
+    if np.allclose(tuned, evaluate.space.initial, rtol=1e-9, atol=0.0):
+        raise Wrong(msg + " They are the starting weights: return the best point the search "
+                    "found, not the one it started from.")  # fmt: skip
+    if not scored:
+        raise Wrong(msg + " Your search never scored them (the mean CMA-ES ended with?): return "
+                    "the best point it scored.")  # fmt: skip
+    raise Wrong(msg + " Return the best point your search scored, not the last one.")
+
+
+def check_mpc_tuning(tune_mpc) -> CheckResult:
+    """Exercise 6.4: ``tune_mpc(evaluate, space, seeds, budget) -> {name: weight}``.
+
+    The reader's loop tunes ``w_ey`` and ``w_ddelta`` (:func:`tuning_space`) with their own
+    CMA-ES of exercise 6.3, scoring a candidate by the mean of ``evaluate(weights, seed)``
+    (:func:`stretch_objective`) over :data:`TUNING_SEEDS`, in at most :data:`TUNING_BUDGET`
+    candidates. Checked: every candidate was scored on every seed once; the search spent its
+    budget (no more, and no generation less); the returned weights score no worse than the start
+    and no worse than the best candidate the search scored. The library's tuner and pycma are
+    refused.
+    """
+    space = tuning_space()
+    lam = 4 + int(3 * math.log(len(space.names)))  # the population of the reader's cma_es
+
+    def body() -> str:
+        refuse_library(
+            tune_mpc,
+            {
+                "tune_weights": tune_weights,
+                "evaluate_weights": evaluate_weights,
+                "tune": library_cmaes.tune,
+                "CmaTuner": library_cmaes.CmaTuner,
+                "cma": None,
+                "CMAEvolutionStrategy": None,
+                "fmin": None,
+                "fmin2": None,
+            },  # fmt: skip
+            "tune with your cma_es of exercise 6.3, scoring a point by the mean of evaluate over "
+            "the seeds.",
+        )
+        evaluate = _CountingObjective(space, TUNING_SEEDS, TUNING_BUDGET)
+        got = call(tune_mpc, evaluate, space, TUNING_SEEDS, TUNING_BUDGET)
+        scores = _check_spending(evaluate, lam)
+        if not isinstance(got, Mapping) and np.shape(got) == (len(space.names),):
+            raise Wrong(f"tune_mpc returned {np.round(np.asarray(got, dtype=float), 3)}, a point "
+                        "of CMA-ES's log10 space; return the weights themselves, as a dict: "
+                        "to_params(space, x_best).")  # fmt: skip
+        if not isinstance(got, Mapping) or set(got) != set(space.names):
+            raise Wrong(f"tune_mpc should return the tuned weights as a dict with the keys "
+                        f"{list(space.names)}: to_params(space, x_best); got {got!r}.")  # fmt: skip
+        tuned = tuple(as_float(got[n], n) for n in space.names)
+        value, start = _judge_tuned(evaluate, scores, tuned)
+        # No measured number in the verdict: the notebook compares it (nbval), and a closed
+        # loop's last digits may differ on another machine.
+        better = "better than" if value < start - 1e-9 else "as good as"
+        return (
+            f"your CMA-ES scored {len(scores)} candidates, each on every seed of {TUNING_SEEDS}, "
+            f"within its budget of {TUNING_BUDGET}, and returned the best of them: weights "
+            f"{better} the start on the mean over the seeds."
+        )
+
+    return grade("6.4 Tuning the MPC with your CMA-ES", body, weight=3.0)

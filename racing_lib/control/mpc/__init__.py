@@ -44,17 +44,18 @@ Modules: :mod:`~racing_lib.control.mpc.settings` (weights, horizon, limits),
 fast path) and :mod:`~racing_lib.control.mpc.qp_cvxpy` (the readable reference).
 """
 
-from racing_lib.control.mpc.coupled import CoupledMPC
+from racing_lib.control.mpc.coupled import CoupledMPC, QPSolver
 from racing_lib.control.mpc.decoupled import DecoupledMPC
 from racing_lib.control.mpc.linearize import augment_steering_lag, expm_batch
 from racing_lib.control.mpc.qp_cvxpy import CvxpyTrackingQP
-from racing_lib.control.mpc.qp_osqp import TrackingQP
+from racing_lib.control.mpc.qp_osqp import TrackingQP, solve_with_clarabel
 from racing_lib.control.mpc.qp_problem import (
     SOLVED_STATUSES,
     QPData,
     QPSettings,
     QPShape,
     QPSolution,
+    StepQP,
     tracking_cost,
 )
 from racing_lib.control.mpc.settings import MX, MPCSettings
@@ -71,9 +72,12 @@ __all__ = [
     "QPSettings",
     "QPShape",
     "QPSolution",
+    "QPSolver",
+    "StepQP",
     "TrackingQP",
     "augment_steering_lag",
     "expm_batch",
+    "solve_with_clarabel",
     "steering_lag_coefficients",
     "tracking_cost",
 ]

@@ -253,7 +253,7 @@ class MPCBase:
         self._tracker.project(obs.x, obs.y)
         for key in self._counters:
             self._counters[key] = 0
-        self._rescues_at_reset = sum(qp.rescues for qp in self._qp_list)
+        self._rescues_at_reset = sum(getattr(qp, "rescues", 0) for qp in self._qp_list)
         self._statuses.clear()
         self._shift_buffer: list[np.ndarray] = []
         self.last_solution = None
@@ -271,7 +271,8 @@ class MPCBase:
         failed and Clarabel was asked to solve; those it solved too are not failures).
         """
         out = {k: float(v) for k, v in self._counters.items()}
-        out["qp_rescues"] = float(sum(qp.rescues for qp in self._qp_list) - self._rescues_at_reset)
+        rescues = sum(getattr(qp, "rescues", 0) for qp in self._qp_list)
+        out["qp_rescues"] = float(rescues - self._rescues_at_reset)
         return out
 
     # --- pieces ----------------------------------------------------------------------------------

@@ -7,6 +7,7 @@ plan.
 from __future__ import annotations
 
 import time
+from typing import Protocol
 
 import numpy as np
 
@@ -16,14 +17,30 @@ from racing_lib.control.mpc.qp_osqp import TrackingQP
 from racing_lib.control.mpc.qp_problem import (
     QPData,
     QPShape,
+    QPSolution,
+    StepQP,
 )
 from racing_lib.control.mpc.settings import COUPLED_SLICE, COUPLED_STATES, MX, MPCSettings
+from racing_lib.errors import ControlError
 from racing_lib.geometry import Track
 from racing_lib.interfaces import Command, Observation
 from racing_lib.model import NU, CarModel, U, X
 from racing_lib.planning.trajectory import Trajectory
 
-__all__ = ["CoupledMPC"]
+__all__ = ["CoupledMPC", "QPSolver"]
+
+
+class QPSolver(Protocol):
+    """What solves the coupled MPC's QP each period (:meth:`CoupledMPC.use_qp`).
+
+    :class:`~racing_lib.control.mpc.qp_osqp.TrackingQP` is one; anything with the same
+    ``solve`` is another. A ``rescues`` attribute (QPs handed to a second solver), if present,
+    is counted in :meth:`CoupledMPC.stats`.
+    """
+
+    def solve(self, data: QPData) -> QPSolution:
+        """The solution of the QP with these numbers (``success`` False when there is none)."""
+        ...
 
 
 class CoupledMPC(MPCBase):
@@ -90,10 +107,45 @@ class CoupledMPC(MPCBase):
             slack_linear=st.slack_linear,
             slack_quadratic=st.slack_quadratic,
         )
+        self._shape = shape
         self.qp = TrackingQP(shape, st.qp)
         self._qp_list = [self.qp]
         self._lam_used = self._lam if st.smooth_transition else np.zeros_like(self._lam)
         self._shift_buffer = []
+
+    def use_qp(self, solver: QPSolver) -> None:
+        """Solve each period's QP with ``solver`` instead of the built-in OSQP fast path.
+
+        Everything else (reference, linearization, bounds, fallbacks, the pedal) stays as it is,
+        so a lap then compares QP solvers alone. ``solver.solve`` receives each period's
+        :class:`~racing_lib.control.mpc.QPData`; with :attr:`qp_shape` it is the whole QP
+        (:meth:`StepQP.from_parts(mpc.qp_shape, data) <racing_lib.control.mpc.StepQP.from_parts>`).
+        Exercise 5.5 drives a lap with the reader's own QP this way
+        (:func:`racing_lib.grading.ch05.check_mpc_lap`).
+        """
+        if not callable(getattr(solver, "solve", None)):
+            raise ControlError(
+                f"use_qp needs an object with solve(data) -> QPSolution, got "
+                f"{type(solver).__name__}."
+            )
+        self.qp = solver
+        self._qp_list = [solver]
+        self._rescues_at_reset = sum(getattr(qp, "rescues", 0) for qp in self._qp_list)
+
+    @property
+    def qp_shape(self) -> QPShape:
+        """The fixed structure of each period's QP: sizes, weights, rate limits, slack penalty."""
+        return self._shape
+
+    @property
+    def last_step_qp(self) -> StepQP | None:
+        """The QP of the last period as a :class:`~racing_lib.control.mpc.StepQP` (a copy).
+
+        Its linear model, reference, weights and bounds, with units; None before the first step.
+        """
+        if self.last_qp_data is None:
+            return None
+        return StepQP.from_parts(self._shape, self.last_qp_data)
 
     @property
     def blend_weights(self) -> np.ndarray:

@@ -34,6 +34,7 @@ MPC).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 
@@ -45,6 +46,7 @@ __all__ = [
     "QPSettings",
     "QPShape",
     "QPSolution",
+    "StepQP",
     "check_qp_data",
     "failed_solution",
     "tracking_cost",
@@ -268,6 +270,113 @@ class QPShape:
             None if band_index is None else int(band_index),
             float(slack_linear), float(slack_quadratic), rate,
         )  # fmt: skip
+
+
+class StepQP(NamedTuple):
+    """One control period's tracking QP as plain arrays: the linear model, the weights, the bounds.
+
+    Everything the QP of the module docstring needs, in one place: :class:`QPData` (what changes
+    from one period to the next) with the fixed parts of :class:`QPShape`. A copy of the numbers
+    the controller solves (:attr:`racing_lib.control.mpc.CoupledMPC.last_step_qp`), for building
+    that QP in a form of one's own (exercise 5.5 builds OSQP's matrices from it). Shapes use
+    ``N`` stages, ``n`` states, ``m`` inputs. For the coupled MPC, ``n = 6`` states ``[v_x (m/s),
+    v_y (m/s), r (rad/s), e_psi (rad), e_y (m), delta (rad)]`` (:class:`~racing_lib.control.mpc.MX`;
+    the last is the steering angle behind the actuator's lag) and ``m = 2`` inputs ``[delta_cmd
+    (rad), a_x (m/s^2)]``; "unit" below means each state's or input's own unit.
+
+    Attributes
+    ----------
+    x0 : ndarray, shape (n,)
+        The measured state now (x_0); not a decision variable.
+    A : ndarray, shape (N, n, n)
+        State matrices of ``x_{k+1} = A_k x_k + B_k u_k + d_k``, k = 0..N-1; entry (i, j) in
+        the unit of state i per unit of state j.
+    B : ndarray, shape (N, n, m)
+        Input matrices B_k; entry (i, j) in the unit of state i per unit of input j.
+    d : ndarray, shape (N, n)
+        Affine terms d_k of the linearization, in the states' units.
+    x_ref : ndarray, shape (N, n)
+        Reference states of stages 1..N (row k - 1 is stage k).
+    u_prev : ndarray, shape (m,)
+        The input applied in the previous period, u_{-1} (rad, m/s^2).
+    u_min, u_max : ndarray, shape (N, m)
+        Bounds of u_0..u_{N-1} (hard).
+    band_min, band_max : ndarray, shape (N,)
+        The soft band on state ``band_index`` at stages 1..N (e_y, m: the track edges).
+    band_index : int
+        Which state the band bounds (4, e_y, for the coupled MPC).
+    state_weights : ndarray, shape (N, n)
+        Diagonal of W per stage 1..N, 1/unit^2 (0 for a state that is not tracked).
+    rate_weights : ndarray, shape (m,)
+        Diagonal of W_du, the penalty on ``u_k - u_{k-1}``, 1/unit^2.
+    rate_limits : ndarray, shape (m,)
+        Largest ``|u_k - u_{k-1}|`` per period, unit (``inf``: none; the steering's slew rate
+        times the period for the coupled MPC).
+    slack_linear, slack_quadratic : float
+        rho_1 (1/m) and rho_2 (1/m^2) of the band's slack penalty ``rho_1 eps + rho_2 eps^2``.
+    """
+
+    x0: np.ndarray
+    A: np.ndarray
+    B: np.ndarray
+    d: np.ndarray
+    x_ref: np.ndarray
+    u_prev: np.ndarray
+    u_min: np.ndarray
+    u_max: np.ndarray
+    band_min: np.ndarray
+    band_max: np.ndarray
+    band_index: int
+    state_weights: np.ndarray
+    rate_weights: np.ndarray
+    rate_limits: np.ndarray
+    slack_linear: float
+    slack_quadratic: float
+
+    @classmethod
+    def from_parts(cls, shape: QPShape, data: QPData) -> StepQP:
+        """The QP of ``shape`` and ``data``, every array copied (changing it changes nothing else).
+
+        Raises
+        ------
+        ControlError
+            The QP has no band, or an input-deviation term (``input_weights`` not all zero),
+            which this form leaves out.
+        """
+        check_qp_data(shape, data)
+        if shape.band_index is None:
+            raise ControlError("StepQP describes a tracking QP with a band; this one has none.")
+        if np.any(shape.input_weights != 0.0):
+            raise ControlError(
+                "StepQP leaves out the input-deviation term, but this QP's input_weights are "
+                f"{shape.input_weights}."
+            )
+
+        def own(value: object) -> np.ndarray:
+            return np.array(value, dtype=float)  # always a new array
+
+        return cls(
+            x0=own(data.x0),
+            A=own(data.A),
+            B=own(data.B),
+            d=own(data.d),
+            x_ref=own(data.x_ref),
+            u_prev=own(data.u_prev),
+            u_min=own(data.u_min),
+            u_max=own(data.u_max),
+            band_min=own(data.band_min),
+            band_max=own(data.band_max),
+            band_index=int(shape.band_index),
+            state_weights=own(shape.state_weights),
+            rate_weights=own(shape.rate_weights),
+            rate_limits=own(shape.rate_limits),
+            slack_linear=float(shape.slack_linear),
+            slack_quadratic=float(shape.slack_quadratic),
+        )
+
+    def copy(self) -> StepQP:
+        """The same QP with every array copied."""
+        return StepQP(*(np.array(v, dtype=float) if isinstance(v, np.ndarray) else v for v in self))
 
 
 def check_qp_data(shape: QPShape, data: QPData) -> None:
