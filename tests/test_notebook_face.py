@@ -24,6 +24,24 @@ def shown(monkeypatch):
     return calls
 
 
+def widgets_of(bundle: dict) -> list:
+    """The widgets of a displayed widget view and of its children."""
+    import warnings
+
+    from ipywidgets import Widget
+
+    with warnings.catch_warnings():  # the registry of live widgets is a deprecated attribute
+        warnings.simplefilter("ignore", DeprecationWarning)
+        registry = Widget.widgets
+    root = registry[bundle["application/vnd.jupyter.widget-view+json"]["model_id"]]
+    out, todo = [], [root]
+    while todo:
+        widget = todo.pop()
+        out.append(widget)
+        todo += list(getattr(widget, "children", ()))
+    return out
+
+
 def test_bind_stores_the_formatted_text_where_myst_nb_glue_finds_it(shown):
     from ast import literal_eval
 
@@ -54,15 +72,20 @@ def test_sliders_show_the_live_widget_and_a_png_of_the_first_position(shown):
         plt.show()
 
     plt.close("all")
-    notebook.sliders(curve, gain=FloatSlider(value=2.0, min=0.0, max=5.0))
+    slider = FloatSlider(value=2.0, min=0.0, max=5.0)
+    notebook.sliders(curve, gain=slider)
     bundle = shown[0][0]
     assert "application/vnd.jupyter.widget-view+json" in bundle
     assert base64.b64decode(bundle["image/png"]).startswith(b"\x89PNG")
-    assert drawn == [2.0, 2.0]  # once for the widget, once for the PNG, both at the first value
-    # The PNG's figure is closed, not shown again; one stays: the widget's (Agg's show keeps it
-    # open, a notebook's inline backend closes it).
-    assert len(plt.get_fignums()) == 1
+    assert drawn == [2.0]  # the first frame is drawn once, for the PNG
+    assert plt.get_fignums() == []  # and its figure closed: nothing else shows it
+    # The widget's output area holds the same frame as state; a slider moved redraws there.
+    box = next(w for w in widgets_of(bundle) if hasattr(w, "outputs"))
+    assert box.outputs[0]["data"]["image/png"] == bundle["image/png"]
+    slider.value = 3.0
+    assert drawn == [2.0, 3.0]
     assert "live" in shown[1][0].data and "`gain`" in shown[1][0].data
+    assert len(shown) == 2  # the bundle and the note: no other output
 
 
 def test_sliders_refuse_a_function_that_draws_nothing(shown):

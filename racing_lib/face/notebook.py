@@ -201,9 +201,11 @@ def sliders(draw: Callable[..., None], **controls: Any) -> None:
     """Show ``draw``'s figure with sliders: live in JupyterLab, at their first position in the book.
 
     ``ipywidgets.interact`` alone leaves a static page empty (the figure lives in the widget's
-    state, which the book cannot run). This displays one output that carries both the live
-    widget and a PNG of the figure at the sliders' first values: JupyterLab shows the widget,
-    and the book, which is told to skip widget views (``book/_config.yml``), shows the PNG.
+    state, which the book cannot run), and a client without widget support (nbval) records its
+    first frame as a plain output. So the first frame is drawn once, as a PNG, and put in two
+    places: in the state of the widget's output area (JupyterLab shows it until a slider moves,
+    then ``draw`` redraws there) and beside the widget view in the same output, where the book,
+    which is told to skip widget views (``book/_config.yml``), finds it.
 
     Parameters
     ----------
@@ -216,12 +218,29 @@ def sliders(draw: Callable[..., None], **controls: Any) -> None:
     import base64
 
     from IPython.display import Markdown, display
-    from ipywidgets import interactive
+    from ipywidgets import Output, VBox
 
-    widget = interactive(draw, **controls)
     first = {name: control.value for name, control in controls.items()}
-    bundle = widget._repr_mimebundle_()
-    bundle["image/png"] = base64.b64encode(_first_frame(draw, first)).decode("ascii")
+    png = base64.b64encode(_first_frame(draw, first)).decode("ascii")
+    area = Output()
+    # Set as state, not displayed: no output message, so no client records the frame twice.
+    area.outputs = (
+        {
+            "output_type": "display_data",
+            "data": {"image/png": png, "text/plain": f"<{draw.__name__} at the first position>"},
+            "metadata": {},
+        },
+    )
+
+    def redraw(_change: object) -> None:
+        with area:
+            area.clear_output(wait=True)
+            draw(**{name: control.value for name, control in controls.items()})
+
+    for control in controls.values():
+        control.observe(redraw, names="value")
+    bundle = VBox([*controls.values(), area])._repr_mimebundle_()
+    bundle["image/png"] = png
     bundle["text/plain"] = (
         f"{draw.__name__}: sliders for {', '.join(controls)} (live in JupyterLab)"
     )
