@@ -539,9 +539,9 @@ angle behind the actuator's lag of exercise 5.2) and $m = 2$ inputs $u = (\\delt
 | `step.slack_linear`, `step.slack_quadratic` | float | $\\rho_1$ (1/m), $\\rho_2$ (1/m$^2$) |
 
 The QP is the library's (`racing_lib.control.mpc.qp_problem`):
-$$\\min\\; \\sum_{k=1}^{N} (x_k - x^\\text{ref}_k)^\\top W (x_k - x^\\text{ref}_k)
-+ \\sum_{k=0}^{N-1} (u_k - u_{k-1})^\\top W_{\\Delta u} (u_k - u_{k-1})
-+ \\sum_{k=1}^{N} \\big(\\rho_1 \\varepsilon_k + \\rho_2 \\varepsilon_k^2\\big)$$
+$$\\min\\; \\sum_{k=1}^{N} (x_k - x^\\text{ref}_k)^\\top W (x_k - x^\\text{ref}_k) +
+\\sum_{k=0}^{N-1} (u_k - u_{k-1})^\\top W_{\\Delta u} (u_k - u_{k-1}) +
+\\sum_{k=1}^{N} \\big(\\rho_1 \\varepsilon_k + \\rho_2 \\varepsilon_k^2\\big)$$
 subject to the model for $k = 0, \\dots, N-1$; the soft band
 $e_{y,\\min,k} - \\varepsilon_k \\le e_{y,k} \\le e_{y,\\max,k} + \\varepsilon_k$ with $\\varepsilon_k \\ge 0$;
 the bounds $u_{\\min,k} \\le u_k \\le u_{\\max,k}$; and the steering's slew rate,

@@ -194,6 +194,10 @@ def test_the_rendered_page_check_counts_equations_against_the_source(tmp_path):
     assert check.check_page(page, source) == []
 
 
+#: A line Markdown reads as the start of a list item or a quote.
+_BLOCK_START = re.compile(r"\s*(?:[-+*>]\s|\d+[.)]\s)")
+
+
 def _markdown_cells(notebook: Path) -> list[str]:
     import json
 
@@ -203,8 +207,10 @@ def _markdown_cells(notebook: Path) -> list[str]:
 
 @pytest.mark.parametrize(
     "notebook",
-    sorted((REPO / "notebooks").glob("*.ipynb")) + sorted((REPO / "exercises").glob("*.ipynb")),
-    ids=lambda p: p.stem,
+    sorted((REPO / "notebooks").glob("*.ipynb"))
+    + sorted((REPO / "exercises").glob("*.ipynb"))
+    + sorted((REPO / "exercises" / "solutions").glob("*.ipynb")),
+    ids=lambda p: f"{p.parent.name}/{p.stem}",
 )
 def test_display_math_stands_in_its_own_block(notebook):
     # MyST reads a $$ glued to the line above as text inside the paragraph (and a "+" or ">" line
@@ -222,6 +228,16 @@ def test_display_math_stands_in_its_own_block(notebook):
                 )
             closes = line.strip().count("$$") >= 2 if not inside else True
             inside = not closes
+            if inside:
+                # The block's next lines, up to its closing $$: none may start like a list item or
+                # a quote, or Markdown ends the equation there.
+                for following in lines[k + 1 :]:
+                    assert not _BLOCK_START.match(following), (
+                        f"{notebook.name}: a line of display math starts like a list item or a "
+                        f"quote ({following.strip()[:40]!r}): move the sign to the line above"
+                    )
+                    if "$$" in following:
+                        break
             if closes and k + 1 < len(lines):
                 below = lines[k + 1].strip()
                 assert below == "", (
