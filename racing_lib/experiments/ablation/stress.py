@@ -19,13 +19,17 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from racing_lib.errors import ArgumentError, PlanningError
+from racing_lib.errors import ArgumentError
 from racing_lib.experiments.ablation.claims import LEVEL, welch_interval
-from racing_lib.experiments.configs import TUNING_CONFIGS, config_spec, tuned_weights
+from racing_lib.experiments.configs import (
+    TUNING_CONFIGS,
+    config_plan,
+    config_spec,
+    tuned_weights,
+)
 from racing_lib.experiments.lap import LapMetrics, LapSpec, drive_lap, run_trials
 from racing_lib.geometry import Track
-from racing_lib.model import CarModel, identified_model
-from racing_lib.planning import Trajectory, plan
+from racing_lib.model import identified_model
 from racing_lib.tracks import load_track
 
 __all__ = [
@@ -119,18 +123,6 @@ def _drive(spec: LapSpec, seed: int) -> LapMetrics:
     return drive_lap(spec, seed=seed).metrics
 
 
-def _stress_plan(track: Track, model: CarModel) -> Trajectory:
-    """The time-optimal plan of ``model``, or a clear error when it does not converge."""
-    planned = plan(track, "time-optimal", model)
-    if not planned.success:
-        raise PlanningError(
-            f"the time-optimal plan of {track.name!r} at grip margin {model.grip_margin:g} did not "
-            f"converge (IPOPT status {planned.status!r}); try a larger grip_margin or another "
-            "circuit."
-        )
-    return planned.trajectory
-
-
 def stress_run(
     track: str | Track = "expressway",
     grip_margin: float = 0.0,
@@ -183,7 +175,8 @@ def stress_run(
         raise ArgumentError("seeds is empty: give a number of seeds or a list of them")
     circuit = load_track(track) if not isinstance(track, Track) else track
     model = identified_model().replace(grip_margin=grip_margin)
-    trajectory = _stress_plan(circuit, model)
+    # Every configuration here plans like main (checked above): one plan serves them all.
+    trajectory = config_plan("main", circuit, model).trajectory
     laps = {}
     for config in configs:
         spec = config_spec(
