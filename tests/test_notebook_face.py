@@ -104,3 +104,11 @@ def test_a_table_aligns_number_columns_right_and_text_columns_left():
     assert table._numeric_columns() == [False, True, True, False]
     assert '<th style="text-align:right">lap (s)</th>' in html
     assert '<td style="text-align:left">agrees</td>' in html
+
+
+def test_a_table_reads_spreads_counts_and_a_parenthesis_as_numbers():
+    table = notebook.Table(
+        ["lap (s)", "walls", "completed", "circuit"],
+        [["105.61 ± 0.057 (105.50)", "0 (0.0/lap)", "10/10", "generated-1000"]],
+    )
+    assert table._numeric_columns() == [True, True, True, False]

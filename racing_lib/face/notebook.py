@@ -29,9 +29,11 @@ _SOLVERS = ("numpy", "scipy", "casadi", "cvxpy", "osqp", "control", "cma")
 _CODE = re.compile(r"`([^`]+)`")
 #: Cells that hold no value (they do not decide how a column aligns).
 _BLANK = {"", "-", "–", "—", "n/a", "nan"}
-#: A table cell that states a number: an optional sign or mark, digits, then at most a unit.
+#: A table cell that states a number: an optional sign or mark, digits (or a count "3/10"), then
+#: at most a unit or a spread, and at most one parenthesis after it ("105.61 ± 0.057 (105.50)").
 _NUMBER = re.compile(
-    r"^\s*[-+−±~≠<>]?\s*\d[\d.,]*\s*(?:[%a-zA-Z/^²°]{0,5}|±\s*[\d.]+\s*\w{0,3})\s*$"
+    r"^\s*[-+−±~≠<>]?\s*\d[\d.,]*(?:/\d+)?\s*(?:[%a-zA-Z/^²°]{0,5}|±\s*[\d.]+\s*\w{0,3})"
+    r"\s*(?:\([^()]*\))?\s*$"
 )
 
 

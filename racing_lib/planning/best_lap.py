@@ -175,7 +175,8 @@ class BestLapSettings:
     car_width : float
         Body width for the e_y bounds, m.
     margin : float or None
-        Clearance to the track edge, m (None: 0.8 with walls, 0.3 open, as the planner).
+        Clearance to the track edge, m (None: as the planner, WALL_MARGIN with walls and
+        OPEN_MARGIN open, both 0.8).
     v_min : float
         Lower bound on v_x, m/s.
     v_top : float

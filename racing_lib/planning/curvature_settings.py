@@ -39,7 +39,8 @@ class CurvatureSettings:
     car_width : float
         Body width of the car, m.
     margin : float or None
-        Clearance to the track edge, m (None: 0.8 with walls, 0.3 on an open track).
+        Clearance to the track edge, m (None: WALL_MARGIN with walls, OPEN_MARGIN on an open
+        track, both 0.8).
     delta_max : float
         Steering angle bound, rad.
     v_top : float or None

@@ -84,7 +84,8 @@ class TrackGrid:
         car_width : float
             Body width of the car, m.
         margin : float, optional
-            Clearance between the car's side and the edge, m (default 0.8 with walls, 0.3 open).
+            Clearance between the car's side and the edge, m
+            (default :data:`WALL_MARGIN` with walls, :data:`OPEN_MARGIN` open, both 0.8).
 
         Raises
         ------

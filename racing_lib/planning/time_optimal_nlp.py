@@ -42,6 +42,7 @@ from racing_lib.errors import PlanningError
 from racing_lib.jit import compiled_or_interpreted
 from racing_lib.model import NU, NX, U, X, model_terms, spatial_dynamics
 from racing_lib.model.params import ModelOptions, ModelParams
+from racing_lib.planning.demands import ellipse_axes
 from racing_lib.planning.time_optimal_settings import TimeOptimalSettings
 
 if TYPE_CHECKING:
@@ -133,8 +134,7 @@ def _path_constraints(
         lb += [-1.0, -1.0]
         ub += [1.0, 1.0]
     if st.friction_ellipse:
-        grip = params.peak_acceleration()
-        grip_x = min(grip, params.pedal.full_brake())  # the g-g diagram's braking axis
+        grip_x, grip = ellipse_axes(params)  # along and across the car: the g-g diagram
         # The tyres' whole longitudinal force, a_x less the steered front tyre's lateral force
         # along the car (Eq. 5): with a_x alone in the ellipse the optimum braked beyond it by
         # scrubbing, a steering zig-zag in the braking zones that the car cannot follow.

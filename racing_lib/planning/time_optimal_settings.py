@@ -59,7 +59,7 @@ class TimeOptimalSettings:
     car_width : float
         Body width, m.
     margin : float or None
-        Clearance to the track edge, m (None: 0.8 with walls, 0.3 open).
+        Clearance to the track edge, m (None: WALL_MARGIN with walls, OPEN_MARGIN open, both 0.8).
     delta_max : float
         Steering angle bound, rad.
     v_min : float
