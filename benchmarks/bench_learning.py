@@ -22,8 +22,8 @@ Example: python benchmarks/bench_learning.py --iterations 5 --seeds 4 --final 10
 ``--inducing M`` sets the inducing inputs of each GP (default 40). They are picked by
 farthest-point sampling, which spreads them to the extremes of the data; as laps accumulate, fewer
 sit near the racing line, the posterior standard deviation there grows, and so does the plan's
-uncertainty margin: with 40, iteration 5 of the shipped run plans 104.51 s, with 80 on the same
-data 103.68 s (2026-12-06), but each NLP takes three to four times longer.
+uncertainty margin: with 40, iteration 5 of the run shipped on 2026-12-06 planned 104.51 s, with 80
+on the same data 103.68 s, but each NLP takes three to four times longer.
 """
 
 from __future__ import annotations

@@ -42,7 +42,7 @@ def test_at_the_limit_the_decoupled_mpc_falls_behind_the_coupled_one(at_the_limi
     main, decoupled = at_the_limit.laps["main"], at_the_limit.laps["decoupled"]
     assert [m.seed for m in main] == [m.seed for m in decoupled] == [0, 1, 2]
     assert all(m.completed for m in main + decoupled)
-    # Measured: main about 105.6 s and clean, decoupled about 111 s with two or three contacts.
+    # Measured (10 seeds): main about 105.7 s and clean, decoupled about 107.6 s, a contact a lap.
     assert sum(m.wall_contacts for m in main) == 0
     lap = {c: at_the_limit.values(c, "lap_time_s").mean() for c in at_the_limit.laps}
     assert lap["decoupled"] > lap["main"] + 1.0

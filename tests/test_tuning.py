@@ -386,6 +386,28 @@ def test_tuned_weights_loader():
         assert all(w > 0 and math.isfinite(w) for w in weights.values())
 
 
+def test_every_shipped_set_is_tuned_by_one_protocol_on_circuits_nothing_reports_on():
+    """Same circuits, seeds and budget for every row; none of them a circuit the course reports."""
+    from racing_lib.experiments.configs import main_tuning_tracks, tuning_record
+    from racing_lib.tracks import builtin_track_names
+
+    tuning_names = [t.name for t in main_tuning_tracks()]
+    main = tuning_record("main")
+    assert main["track"] == tuning_names
+    assert main["started_from"] == "defaults"
+    for name in tuned_configurations():
+        record = tuning_record(name)
+        assert record["track"] == tuning_names, name
+        assert record["seeds"] == main["seeds"], name
+        assert record["settings"] == main["settings"], name
+        assert record["generations"] == main["generations"], name
+        if name != "main":
+            assert record["started_from"] == "tuned 'main'", name
+    # Drawn by the generator, so no real circuit and none of the built-in tracks is among them.
+    assert all(name.startswith("generated-") for name in tuning_names)
+    assert set(builtin_track_names()).isdisjoint(tuning_names)
+
+
 # --------------------------------------------------------------------------------------------------
 # The MPC weights (a short walled track: about 1 s per lap)
 

@@ -30,7 +30,7 @@ from racing_lib.io import atomic_write_json, data_file, jsonable
 from racing_lib.model import CarModel, ModelOptions, identified_model
 from racing_lib.optim.cmaes import TuningResult, TuningSettings
 from racing_lib.planning import PlanResult, Trajectory, plan
-from racing_lib.tracks import figure_eight_track, load_track
+from racing_lib.tracks import CircuitSpec, generate, load_track
 
 if TYPE_CHECKING:
     # Only named in annotations: dask is an optional dependency (racing-lib[distributed]).
@@ -39,6 +39,8 @@ if TYPE_CHECKING:
 __all__ = [
     "TUNED_FILE_FORMAT",
     "TUNED_WEIGHTS_FILE",
+    "TUNING_CIRCUIT_LENGTH",
+    "TUNING_CIRCUIT_SEEDS",
     "TUNING_CONFIGS",
     "config_model",
     "config_plan",
@@ -333,15 +335,25 @@ def config_spec(
     )
 
 
-def main_tuning_tracks() -> list[Track]:
-    """The circuits the shipped weights of ``'main'`` are tuned on, all made by the package.
+#: Seeds of the generated circuits the shipped weights are tuned on: far from the seeds that the
+#: course and the benchmarks draw for testing (0-49, 100-149, 500-509).
+TUNING_CIRCUIT_SEEDS: tuple[int, ...] = tuple(range(1000, 1008))
 
-    The expressway (walls, the paper's main track), the shortcut (open, sharper corners) and a
-    figure-eight with a bridge (walls, two slow lobes): weights that score well on the mean of
-    the three are not tuned to one layout, and every real circuit stays unseen for testing them
-    (``benchmarks/bench_circuits.py``).
+#: Their lengths, m: shorter than most real circuits, so that a generation of laps stays cheap.
+TUNING_CIRCUIT_LENGTH: tuple[float, float] = (2000.0, 4000.0)
+
+
+def main_tuning_tracks() -> list[Track]:
+    """The circuits every shipped weight set is tuned on: eight generated ones, none of them real.
+
+    Circuits the generator draws (:func:`racing_lib.tracks.generate`, seeds
+    :data:`TUNING_CIRCUIT_SEEDS`, 2-4 km, open edges), so that every track the course and the
+    benchmarks report on (the expressway of the paper's table, the shortcut, the figure-eight and
+    every real circuit) stays unseen by the tuning. The command line draws the same ones with
+    ``racing-lib tracks --generate 8 --seed 1000 --length 2000 4000``.
     """
-    return [load_track("expressway"), load_track("shortcut"), figure_eight_track(80.0, 12.0)]
+    spec = CircuitSpec(length=TUNING_CIRCUIT_LENGTH)
+    return [generate(seed, spec) for seed in TUNING_CIRCUIT_SEEDS]
 
 
 def generate_tuned_weights(
@@ -384,16 +396,9 @@ def generate_tuned_weights(
         Progress bars.
     initial : str or dict, optional
         Where CMA-ES starts: the MPC's default weights (None), the shipped tuned weights of another
-        configuration (its name, e.g. ``'main'``: the ablations start from the main result, so a
-        shorter budget suffices), or explicit weights.
+        configuration (its name, e.g. ``'main'``: the ablations start from the main result; read
+        from ``out`` when it has them, else from the shipped file), or explicit weights.
     """
-    start = tuned_weights(initial) if isinstance(initial, str) else initial
-    if isinstance(initial, str) and start is None:
-        raise ControlError(
-            f"no tuned weights shipped for {initial!r} to start from; tune it first or pass "
-            "initial=None."
-        )
-
     track_list = list(track) if isinstance(track, (list, tuple)) else [track]
     tracks = [t if isinstance(t, Track) else load_track(str(t)) for t in track_list]
     target = FilePath(out) if out is not None else data_file(TUNED_WEIGHTS_FILE)
@@ -401,6 +406,17 @@ def generate_tuned_weights(
     if target.exists():
         data = json.loads(target.read_text())
         data.setdefault("configs", {})
+    start = initial
+    if isinstance(initial, str):
+        # The file being written first: a re-tuning into a new file starts each row from the
+        # main weights tuned in the same run, not from the shipped ones.
+        written = data["configs"].get(initial, {}).get("weights")
+        start = dict(written) if written else tuned_weights(initial)
+        if start is None:
+            raise ControlError(
+                f"no tuned weights for {initial!r} to start from, neither in {target} nor "
+                "shipped; tune it first or pass initial=None."
+            )
     results: dict[str, TuningResult] = {}
     for name in configs:
         specs = [config_spec(name, trk) for trk in tracks]
