@@ -12,8 +12,8 @@ pycma's default population; ``main`` starts from the MPC's default weights and e
 main's result. No circuit the course or the benchmarks report on is among the tuning circuits.
 
 Run it after a change to the MPC, the planner or the simulated car, then commit the file and
-restamp the ablation table (``racing_lib.experiments.ablation``). About 5 min per configuration on
-two cores. Interrupted, it resumes from the checkpoints in ``--work-dir``.
+regenerate the ablation table (CONTRIBUTING.md says how). 7-13 min per configuration on two cores
+(2026-12-07). Interrupted, it resumes from the checkpoints in ``--work-dir``.
 """
 
 from __future__ import annotations
@@ -43,7 +43,8 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
 
     tracks = main_tuning_tracks()
-    settings = TuningSettings.default(max_generations=GENERATIONS, seed=0)
+    # popsize=None: pycma's default population even in fast mode, which would shrink it.
+    settings = TuningSettings.default(max_generations=GENERATIONS, seed=0, popsize=None)
     for name in args.configs:
         t0 = time.perf_counter()
         results = generate_tuned_weights(
