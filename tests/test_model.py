@@ -595,3 +595,70 @@ def test_the_car_model_carries_its_top_speed() -> None:
     assert fast.differences(model) == []  # the top speed is the planner's; it predicts nothing
     with pytest.raises(ModelError, match="v_top"):
         model.replace(v_top=0.0)
+
+
+def test_the_lateral_eigenvalue_test_is_the_shifted_blocks_determinant_and_trace():
+    from racing_lib.model import lateral_eigenvalue_test
+    from racing_lib.model.lateral import lateral_linearization
+
+    params = ModelParams()
+    test = lateral_eigenvalue_test(params, ModelOptions())
+    model = Model(params, ModelOptions())
+    for v, accel, sigma in ((30.0, 0.0, 0.0), (45.0, -8.0, 0.0), (20.0, -3.0, 1.5)):
+        eig = np.linalg.eigvals(lateral_linearization(params, v, accel=accel).A)
+        xi = np.array([v, 0, 0, 0, 0, 0.0])
+        a_x = accel - float(model.xi_dot(xi, [0.0, 0.0])[X.VX])  # as the linearization picks it
+        det, trace = (float(x) for x in test(xi, [0.0, a_x], 0.0, 0.0, sigma))
+        assert det == pytest.approx(float(np.prod(eig + sigma).real), rel=1e-9)
+        assert trace == pytest.approx(float(np.sum(eig + sigma).real), rel=1e-9)
+
+
+def test_a_car_that_oversteers_under_braking_fails_the_test_there():
+    from racing_lib.model import lateral_eigenvalue_test
+
+    # Equal tyres front and rear and a high centre of gravity, like CommonRoad's BMW 320i.
+    bmw = ModelParams(m=1093.3, l_f=1.156, l_r=1.422, h_c=0.614, I_zz=1797.3, C_xw=0.0,
+                      c_rr=0.0, mu=1.049, B_f=15.7, C_f=1.4, D_f=0.95, B_r=15.8, C_r=1.2,
+                      D_r=1.1)  # fmt: skip
+    test = lateral_eigenvalue_test(bmw, ModelOptions())
+    xi = [40.0, 0, 0, 0, 0, 0]
+    rolling = [float(x) for x in test(xi, [0.0, 0.0], 0.0, 0.0, 0.0)]
+    braking = [float(x) for x in test(xi, [0.0, -6.0], 0.0, 0.0, 0.0)]
+    assert rolling[0] > 0.0 and rolling[1] < 0.0  # stable
+    assert braking[0] < 0.0  # a real eigenvalue in the right half plane: it diverges
+
+
+@pytest.mark.parametrize("form", ["share", "demand"])
+def test_both_throttle_forms_invert_and_agree_at_full_throttle(form):
+    pedal = PedalMap(m_0=0.1, m_xi=(0.0,) * NX, m_thr=11.5, m_brk=11.0, p_thr=84.0, throttle=form)
+    share = dataclasses.replace(pedal, throttle="share")
+    for v in (5.0, 13.0, 40.0):
+        xi = np.array([v, 0, 0, 0, 0, 0.0])
+        assert pedal.limits(xi) == share.limits(xi)  # full throttle and full brake alike
+        for u in (-0.8, -0.2, 0.0, 0.3, 0.7, 1.0):
+            a = pedal.ax(xi, u)
+            if u < 1.0 and (form == "share" or a < pedal.limits(xi)[1] - 1e-9):
+                assert pedal.pedal(a, xi) == pytest.approx(u, abs=1e-12)
+    # Partial throttle differs: CommonRoad's pedal asks for u a_max until the power caps it.
+    xi = np.array([13.0, 0, 0, 0, 0, 0.0])
+    demand = dataclasses.replace(pedal, throttle="demand")
+    assert demand.ax(xi, 0.4) == pytest.approx(0.1 + min(0.4 * 11.5, 84.0 / 13.0))
+    assert share.ax(xi, 0.4) == pytest.approx(0.1 + 0.4 * min(11.5, 84.0 / 13.0))
+    assert PedalMap.from_dict(demand.to_dict()) == demand
+
+
+def test_an_unknown_throttle_form_is_refused():
+    with pytest.raises(ModelError, match="throttle must be one of"):
+        PedalMap(throttle="linear")
+
+
+def test_a_car_models_lateral_stability_is_checked_and_kept():
+    from racing_lib.model import CarModel
+
+    model = CarModel(ModelParams(), lateral_stability=1.5)
+    assert CarModel.from_dict(model.to_dict()) == model
+    assert "below -1.50 1/s" in model.describe()
+    assert CarModel(ModelParams()).lateral_stability is None
+    for bad in (-1.0, True, float("nan")):
+        with pytest.raises(ModelError, match="lateral_stability"):
+            CarModel(ModelParams(), lateral_stability=bad)

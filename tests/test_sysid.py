@@ -398,3 +398,19 @@ def test_the_simulated_cars_actuator_limits_are_identified(result):
     assert abs(result.errors()["p_thr (full throttle)"]) < 0.05
     assert result.success
     assert result.car_model().steer_rate_max == result.steer_rate_max
+
+
+def test_the_simulated_car_stays_stable_when_it_brakes_with_the_steering_held(logs, result):
+    # The braking-stability run: the simulated car's kick dies out, so its plans stay the
+    # paper's (no lateral stability row), and the run feeds no other fit.
+    assert any(log.kind == "braking-stability" for log in logs)
+    assert result.braking_stable is True and result.stability_margin is None
+    assert result.car_model().lateral_stability is None
+    assert any("stayed stable" in note for note in result.notes), result.notes
+
+
+def test_the_pedal_map_never_promises_more_power_than_full_throttle_gave(result):
+    measured = result.value("p_thr (full throttle)")
+    assert result.params.pedal.p_thr <= measured
+    # The simulated car's throttle is a share of what the engine gives (its powertrain's form).
+    assert result.params.pedal.throttle == "share"

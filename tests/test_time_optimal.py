@@ -274,3 +274,49 @@ def test_at_the_top_speed_the_plan_neither_crabs_nor_flickers(oval, qp, drag):
         inner = traj.ax[run[3:-3]]
         if inner.size > 2:
             assert np.max(np.abs(np.diff(inner))) < 0.25, np.round(inner[:12], 2)
+
+
+#: A car with the same tyres front and rear and a high centre of gravity, like CommonRoad's BMW
+#: 320i (its identified values, rounded): braking hard from speed, it oversteers by itself.
+_OVERSTEERING = ModelParams(m=1093.3, l_f=1.156, l_r=1.422, h_c=0.614, I_zz=1797.3, C_xw=0.0,
+                            c_rr=0.0, mu=1.049, B_f=15.7, C_f=1.4, D_f=0.95, B_r=15.8, C_r=1.2,
+                            D_r=1.1)  # fmt: skip
+
+
+def _nodes(res) -> tuple[np.ndarray, np.ndarray]:
+    """A plan's states (N, 6) and inputs (N, 2) at its nodes."""
+    sol, grid = res.solution, res.grid
+    states = np.column_stack([sol[k] for k in ("vx", "vy", "r", "epsi", "ey")] + [grid.s])
+    return states, np.column_stack([sol["delta"], sol["ax"]])
+
+
+@pytest.mark.slow
+def test_a_plan_with_a_stability_margin_keeps_the_lateral_dynamics_stable():
+    from racing_lib.tracks import load_track
+
+    track = load_track("shortcut")
+    free = solve_time_optimal(track, _OVERSTEERING, ModelOptions(), TimeOptimalSettings())
+    st = TimeOptimalSettings(lateral_stability=1.0, steer_rate=0.4)
+    bound = solve_time_optimal(track, _OVERSTEERING, ModelOptions(), st)
+    assert free.success and bound.success, (free.status, bound.status)
+    # Unbounded, the time-optimal plan brakes where the car diverges by itself (up to about
+    # 5 1/s for this car); bounded, no real eigenvalue is right of -1 1/s, and all are stable
+    # (a slow pair near the tyres' peak in a corner may lie between -1 and 0) ...
+    from racing_lib.model import lateral_eigenvalue_test
+    from racing_lib.model.lateral import lateral_growth
+
+    assert np.max(lateral_growth(_OVERSTEERING, *_nodes(free))) > 1.0
+    states, inputs = _nodes(bound)
+    growth = lateral_growth(_OVERSTEERING, states, inputs, theta=bound.grid.theta)
+    assert np.max(growth) < 1e-3
+    # Both eigenvalues on one side of -1 1/s (the shifted determinant): under braking the
+    # diverging one is kept left of it while the other lies far left.
+    test = lateral_eigenvalue_test(_OVERSTEERING, ModelOptions()).map(len(states))
+    det = np.asarray(test(states.T, inputs.T, bound.grid.kappa, bound.grid.theta, 1.0)[0])
+    assert np.min(det) >= -1e-4
+    # ... the steering changes no faster than 0.4 rad/s from node to node ...
+    sol = bound.solution
+    rate = np.abs(np.diff(np.append(sol["delta"], sol["delta"][0]))) / sol["dt"]
+    assert np.max(rate) <= 0.4 * (1 + 1e-4)
+    # ... and it costs lap time, not much (about 1.5 %).
+    assert free.lap_time < bound.lap_time < 1.05 * free.lap_time

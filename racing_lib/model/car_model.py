@@ -75,6 +75,12 @@ class CarModel:
         Top speed, m/s: the plans keep the car's speed ``sqrt(v_x^2 + v_y^2)`` at or below it.
         A car with a governed top speed (identified at full throttle) gives no acceleration
         beyond it, whatever the pedal says; default :data:`DEFAULT_V_TOP`.
+    lateral_stability : float or None
+        Plan only where the model's lateral dynamics are stable, with their eigenvalues at least
+        this far left of zero, 1/s (:attr:`racing_lib.planning.TimeOptimalSettings.\
+lateral_stability`). Set by identification for a car that diverged in yaw when it braked
+        with the steering held; the margin is how much faster it diverged than the model said.
+        None (default): no such bound, as for the simulated car, which stays stable there.
 
     Examples
     --------
@@ -94,6 +100,7 @@ class CarModel:
     grip_margin: float = 0.0
     edge_margin: float | None = None
     v_top: float = DEFAULT_V_TOP
+    lateral_stability: float | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.params, ModelParams):
@@ -114,6 +121,10 @@ class CarModel:
         if self.edge_margin is not None:
             self._check_number("edge_margin", "m", lambda v: math.isfinite(v) and v >= 0, ">= 0")
         self._check_number("v_top", "m/s", lambda v: math.isfinite(v) and v > 0.0, "> 0")
+        if self.lateral_stability is not None:
+            self._check_number(
+                "lateral_stability", "1/s", lambda v: math.isfinite(v) and v >= 0, ">= 0 or None"
+            )
 
     def _check_number(self, name: str, unit: str, ok: Callable[[float], bool], rule: str) -> None:
         """Store field ``name`` as a float, refusing a value that breaks ``rule``."""
@@ -168,9 +179,15 @@ class CarModel:
     def describe(self) -> str:
         """One line for people: friction, effects, steering lag and margins."""
         edge = "default" if self.edge_margin is None else f"{self.edge_margin:g} m"
+        stable = (
+            ""
+            if self.lateral_stability is None
+            else f", lateral eigenvalues below -{self.lateral_stability:.2f} 1/s"
+        )
         return (
             f"mu {self.params.mu:.3f}, {self.options.label()}, steering lag "
             f"{self.steer_tau:.3f} s, grip margin {self.grip_margin:.0%}, edge margin {edge}"
+            f"{stable}"
         )
 
     # --- files ------------------------------------------------------------------------------------
@@ -185,6 +202,7 @@ class CarModel:
             "grip_margin": self.grip_margin,
             "edge_margin": self.edge_margin,
             "v_top": self.v_top,
+            "lateral_stability": self.lateral_stability,
         }
 
     @classmethod

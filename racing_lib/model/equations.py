@@ -376,6 +376,38 @@ def jacobians(
     )
 
 
+@_cached
+def lateral_eigenvalue_test(
+    params: ModelParams = ModelParams(), options: ModelOptions = ModelOptions()
+) -> ca.Function:
+    """``(xi, u, kappa, theta, sigma) -> (det, trace)``: lateral eigenvalues left of ``-sigma``.
+
+    The determinant (1/s^2) and the trace (1/s) of ``A_lat + sigma I``, with ``A_lat`` the
+    ``(v_y, r)`` block of the time-domain Jacobian ``A_c`` of :func:`jacobians` at the given
+    state and input and ``sigma`` a shift (1/s). The block's eigenvalues are those of the lateral
+    dynamics linearized there (:mod:`racing_lib.model.lateral` studies them around straight
+    driving); both lie left of ``-sigma`` exactly where ``det >= 0`` and ``trace <= 0`` (the
+    shifted block is then stable: Routh-Hurwitz for a 2 x 2 matrix). With ``sigma = 0`` the
+    test fails where the car starts to diverge by itself, as it does under braking when load
+    transfer unloads the rear axle until it oversteers (CommonRoad's BMW 320i from about 37 m/s
+    at 4 m/s^2: the determinant turns negative), or near the tyres' peak in a corner, where
+    their slopes and with them the trace fall towards zero.
+    """
+    xi, u, kappa, theta = _symbols()
+    a_c = ca.jacobian(time_dynamics(params, options)(xi, u, kappa, theta), xi)
+    vy, r = int(X.VY), int(X.R)
+    sigma = ca.SX.sym("sigma")
+    det = (a_c[vy, vy] + sigma) * (a_c[r, r] + sigma) - a_c[vy, r] * a_c[r, vy]
+    trace = a_c[vy, vy] + a_c[r, r] + 2.0 * sigma
+    return ca.Function(
+        "lateral_eigenvalue_test",
+        [xi, u, kappa, theta, sigma],
+        [det, trace],
+        [*INPUT_NAMES, "sigma"],
+        ["det", "trace"],
+    )
+
+
 def _integrate(f: ca.Function, xi: Any, u: Any, kappa: Any, theta: Any, h: Any, method: str) -> Any:
     """One step of length ``h`` with ``u``, ``kappa``, ``theta`` held constant."""
     if method == "euler":

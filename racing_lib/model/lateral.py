@@ -21,11 +21,12 @@ import control
 import numpy as np
 
 from racing_lib.errors import ModelError
-from racing_lib.model import Model, ModelOptions, ModelParams, U, X
+from racing_lib.model import Model, ModelOptions, ModelParams, U, X, jacobians
 
 __all__ = [
     "LateralAnalysis",
     "lateral_analysis",
+    "lateral_growth",
     "lateral_linearization",
     "understeer_gradient",
 ]
@@ -233,3 +234,51 @@ def lateral_analysis(
         characteristic_speed=math.sqrt(L / K) if K > 0.0 else math.inf,
         critical_speed=math.sqrt(-L / K) if K < 0.0 else math.inf,
     )
+
+
+def lateral_growth(
+    params: ModelParams,
+    states: np.ndarray,
+    inputs: np.ndarray,
+    options: ModelOptions | None = None,
+    theta: np.ndarray | None = None,
+) -> np.ndarray:
+    """The largest real part of the lateral eigenvalues at each of N states, 1/s.
+
+    The ``(v_y, r)`` block of the model's Jacobian ``A_c`` at each state and input, as
+    :func:`racing_lib.model.lateral_eigenvalue_test` tests it: positive where the car diverges
+    by itself (under hard braking, for a car that oversteers there). Taught in notebook 08.
+
+    Parameters
+    ----------
+    params : ModelParams
+        Model parameters.
+    states : ndarray, shape (N, 6)
+        States ``[v_x, v_y, r, e_psi, e_y, s]`` (m/s, m/s, rad/s, rad, m, m); the lateral block
+        depends on the first three only.
+    inputs : ndarray, shape (N, 2)
+        Inputs ``[delta, a_x]`` (rad, m/s^2).
+    options : ModelOptions, optional
+        Model effects.
+    theta : ndarray, shape (N,), optional
+        Road pitch at each state, rad (default level). It matters where the planner holds an
+        eigenvalue at zero: on a 1 % slope the loads shift enough to move it by 0.06 1/s.
+
+    Returns
+    -------
+    numpy.ndarray, shape (N,)
+    """
+    xi = np.atleast_2d(np.asarray(states, dtype=float))
+    u = np.atleast_2d(np.asarray(inputs, dtype=float))
+    n = xi.shape[0]
+    pitch = np.zeros(n) if theta is None else np.asarray(theta, dtype=float).ravel()
+    if xi.shape[1] != len(X) or u.shape != (n, 2) or pitch.size != n:
+        raise ModelError(
+            f"lateral_growth takes states of shape (N, {len(X)}), inputs of shape (N, 2) and "
+            f"theta of N values; got {xi.shape}, {u.shape} and {pitch.size}."
+        )
+    jac = jacobians(params, options or ModelOptions()).map(n)
+    a_c = np.asarray(jac(xi.T, u.T, np.zeros(n), pitch)[0])  # 6 x 6N, one block per state
+    lat = [int(X.VY), int(X.R)]
+    blocks = a_c.reshape(len(X), n, len(X)).transpose(1, 0, 2)[:, lat][:, :, lat]
+    return np.max(np.linalg.eigvals(blocks).real, axis=1)

@@ -87,6 +87,10 @@ class ModelOptions:
 BRAKE_KNEE = 0.8
 
 
+#: The forms of :attr:`PedalMap.throttle`.
+THROTTLE_FORMS = ("share", "demand")
+
+
 @dataclass(frozen=True)
 class PedalMap:
     """Empirical map between the pedal ``u_p`` in [-1, 1] and the tyre acceleration ``a_x``.
@@ -138,6 +142,15 @@ class PedalMap:
         value of ``m_brk`` or more: braking is linear in the pedal to ``-m_brk``. The knee's
         bend always ends at ``u_p = -1``: with ``brake_max < 1`` the map stops before it, and
         full brake gives less than ``a_brk_max`` (identification sets one or the other).
+    throttle : {"share", "demand"}
+        How a partial throttle relates to full throttle. ``"share"`` (default, the form above):
+        the pedal is a share of what full throttle gives at that speed,
+        ``g_thr(v_x) max(u_p, 0)``, as for an engine whose pedal scales its torque.
+        ``"demand"``: the pedal asks for an acceleration, which the power caps,
+        ``min(m_thr max(u_p, 0), g_thr(v_x))``, as for CommonRoad's cars (``a = u_p a_max``,
+        cut at ``a_max v_switch / v``). Full throttle, hence :meth:`limits`, is the same in
+        both; partial throttle and its inverse :meth:`pedal` differ. Identification fits both
+        and keeps the better.
     brake_max : float
         The deepest brake pedal the car holds, in (0, 1] (1: the full pedal). A car without
         anti-lock brakes locks its wheels beyond some pedal, and a locked wheel steers nothing:
@@ -153,8 +166,13 @@ class PedalMap:
     p_thr: float | None = None
     a_brk_max: float | None = None
     brake_max: float = 1.0
+    throttle: str = "share"
 
     def __post_init__(self) -> None:
+        if self.throttle not in THROTTLE_FORMS:
+            raise ModelError(
+                f"PedalMap.throttle must be one of {THROTTLE_FORMS}, got {self.throttle!r}."
+            )
         object.__setattr__(self, "m_0", as_float("PedalMap.m_0", self.m_0))
         try:
             m_xi = tuple(as_float("PedalMap.m_xi", v) for v in np.asarray(self.m_xi).ravel())
@@ -229,6 +247,7 @@ class PedalMap:
             "p_thr": self.p_thr,
             "a_brk_max": self.a_brk_max,
             "brake_max": self.brake_max,
+            "throttle": self.throttle,
         }
 
     @classmethod
@@ -310,11 +329,17 @@ class PedalMap:
         """
         gain = self.throttle_gain(self._speed(xi))
         if isinstance(xi, ca.SX | ca.MX | ca.DM) or isinstance(u_p, ca.SX | ca.MX):
-            return self._base(xi) + gain * ca.fmax(u_p, 0) + self._brake(u_p)
+            return self._base(xi) + self._throttle(gain, u_p, ca.fmin, ca.fmax) + self._brake(u_p)
         scalar = np.ndim(xi) == 1 and np.ndim(u_p) == 0
         u_p = np.asarray(u_p, dtype=float)
-        out = self._base(xi) + gain * np.maximum(u_p, 0.0) + self._brake(u_p)
+        out = self._base(xi) + self._throttle(gain, u_p, np.minimum, np.maximum) + self._brake(u_p)
         return float(out[0]) if scalar else out
+
+    def _throttle(self, gain: Any, u_p: Any, fmin: Any, fmax: Any) -> Any:
+        """Throttle part of ``a_x`` (m/s^2, >= 0): full throttle's ``gain`` (m/s^2), pedal(s)."""
+        if self.throttle == "share":
+            return gain * fmax(u_p, 0.0)
+        return fmin(self.m_thr * fmax(u_p, 0.0), gain)
 
     def limits(self, xi: ArrayLike | ca.SX | ca.MX | ca.DM) -> tuple[Numeric, Numeric]:
         """``(a_min, a_max)`` in m/s^2 at full brake and full throttle for state(s) ``xi``.
@@ -387,7 +412,11 @@ class PedalMap:
         if knee is not None:
             u_k, a_k, slope = knee
             u_brake = select(excess >= -a_k, u_brake, u_k + (excess + a_k) / slope)
-        u_p = select(excess >= 0.0, excess / gain, u_brake)
+        if self.throttle == "share":
+            u_throttle = excess / gain
+        else:  # the pedal that asks for it, or full throttle where the power caps it
+            u_throttle = select(excess >= gain, 1.0, excess / self.m_thr)
+        u_p = select(excess >= 0.0, u_throttle, u_brake)
         # Not np.clip: its Python wrapper costs more than the rest on a single value.
         return fmin(fmax(u_p, -self.brake_max), 1.0)
 

@@ -18,6 +18,7 @@ Examples
 from __future__ import annotations
 
 import dataclasses
+import math
 import time
 import warnings
 from collections.abc import Callable
@@ -247,12 +248,17 @@ _Settings = TypeVar("_Settings", CurvatureSettings, TimeOptimalSettings)
 def _with_grid(settings: _Settings, spacing: float, model: CarModel) -> _Settings:
     """Planner settings with the node spacing (m) and the model's margin and top speed.
 
-    The model's edge margin (m) applies if it has one, its top speed (m/s) where the settings
-    leave it open.
+    The model's edge margin (m) applies if it has one; its top speed (m/s) and its lateral
+    stability margin (1/s, when it has one) where the settings leave them open.
     """
     changes: dict[str, float] = {"spacing": spacing}
     if model.edge_margin is not None:
         changes["margin"] = model.edge_margin
+    if model.lateral_stability is not None and isinstance(settings, TimeOptimalSettings):
+        if settings.lateral_stability is None:
+            changes["lateral_stability"] = model.lateral_stability
+        if settings.steer_rate is None and math.isfinite(model.steer_rate_max):
+            changes["steer_rate"] = model.steer_rate_max
     if settings.v_top is None:
         changes["v_top"] = model.v_top
     return dataclasses.replace(settings, **changes)

@@ -88,6 +88,23 @@ class TimeOptimalSettings:
         node. Where the laps it learned from went, the correction
         is sure and the plan may go close to the limit; where they did not, it keeps away. No
         effect on a model without a correction.
+    lateral_stability : float or None
+        Keep the plan where the model's lateral dynamics are stable, and where braking has
+        not brought one of their eigenvalues to within ``lateral_stability`` (1/s) of zero: at
+        every node the determinant and trace of their linearization say stable, and the
+        determinant shifted by the margin keeps both eigenvalues on one side of
+        ``-lateral_stability`` (:func:`racing_lib.model.lateral_eigenvalue_test`). A car that
+        oversteers under braking diverges by itself in the plan's braking zones, faster than a
+        rate-limited steering can catch it, and the time-optimal plan goes there, since in the
+        model it costs nothing. None (default): no such rows, as in the paper;
+        :func:`racing_lib.planning.plan` takes the model's
+        (:attr:`racing_lib.model.CarModel.lateral_stability`).
+    steer_rate : float or None
+        The steering actuator's rate limit, rad/s: between two nodes the steering angle changes
+        by at most this times the time the car takes from one to the other. None (default): no
+        such row (the steering-rate weight ``w_ddelta`` regularizes alone, as in the paper);
+        :func:`racing_lib.planning.plan` takes the model's ``steer_rate_max`` for a model with
+        a lateral stability margin, whose plans otherwise weave (see ``lateral_stability``).
     pedal_limits : {"iterate", "exact"}
         How the state-dependent a_x limits are imposed (see the module docstring).
     max_outer : int
@@ -138,6 +155,8 @@ class TimeOptimalSettings:
     friction_ellipse: bool = True
     drive_axle_circle: bool = True
     uncertainty_margin: float = 2.0
+    lateral_stability: float | None = None
+    steer_rate: float | None = None
     pedal_limits: str = "exact"
     max_outer: int = 4
     outer_tol: float = 0.05

@@ -33,8 +33,9 @@ Identified, in this order (each step uses the ones before it):
    g sin(theta) = -C_xw v_x^2 / m - c_rr g cos(theta)`` by linear least squares.
 4. **Pedal map** (Appendix C; laps and pedal steps): the tyre acceleration
    ``a_x = v_x_dot - r v_y + (C_xw v_x^2 + R_x + F_yf sin(delta))/m + g sin(theta)``
-   against ``[1, v_x, max(u_p, 0), min(u_p, 0)]`` by linear least squares
-   (:class:`~racing_lib.model.PedalMap`).
+   against ``[1, v_x, throttle, min(u_p, 0)]`` by linear least squares
+   (:class:`~racing_lib.model.PedalMap`), for each throttle form (a share of full throttle, or
+   an acceleration the power caps) and power corner speed; the better form is kept.
 
 5. **Actuator limits** (their own manoeuvres, which feed none of the fits above): the steering
    rate limit from large steering steps at low speed (a one-parameter search on the lateral
@@ -42,7 +43,12 @@ Identified, in this order (each step uses the ones before it):
    run (``a_x v_x`` on its power-limited plateau). They reach
    :meth:`IdentificationResult.car_model` (``steer_rate_max``; ``steer_max`` from the data sheet
    via ``identify(steer_max=...)``), and the pedal map's power limit when the map's own data
-   never ran out of power.
+   never ran out of power or promised more than full throttle gave. A third run brakes from
+   speed with the steering held: a car whose small yaw grows by itself (CommonRoad's cars, not
+   ours) gets plans that keep the model's lateral dynamics stable, with a margin (1/s) of how
+   much faster the car diverged than the model predicted
+   (:attr:`IdentificationResult.stability_margin`,
+   :attr:`racing_lib.model.CarModel.lateral_stability`).
 
 A car nobody here wrote. The manoeuvres drive with a watchdog
 (:mod:`~racing_lib.experiments.sysid.watch`, :class:`ManoeuvreSettings`): a car that leaves the
@@ -51,14 +57,16 @@ bound: wheel spin under throttle, locked wheels under a brake, tyres weaker than
 gets its throttle lifted and then capped, its brake released and re-applied lighter, a yaw damper
 on its steering and, in the circles, a speed that stops rising at the level it could hold.
 Nothing changes until a limit is met, and the simulated car meets none in its manoeuvres: its
-logs, hence its shipped identification, are bit for bit what they were. CommonRoad's vehicles
-1-3 (:mod:`racing_lib.plants.commonroad`: no drag, no ABS, a 0.4 rad/s steering rate limit, a
-governed top speed) are identified with the same settings (``tests/test_foreign_plant.py``). A
-car that is lost anyway stops the run with one :class:`~racing_lib.errors.PlantError` naming the
-manoeuvre and what to change; data that cannot determine a parameter raise a
-:class:`~racing_lib.errors.ModelError` that says which manoeuvre ran, what it reached, and what to
-change (or which manoeuvre to add, if it did not run). :attr:`IdentificationResult.success` and
-the verdict of :meth:`IdentificationResult.report` judge each sub-model's R^2.
+logs, hence its shipped identification, are bit for bit what they were. A lap that loses the
+car anyway is driven again at a lower share of its speed profile (:func:`lap_logs`). CommonRoad's
+vehicles 1-3 (:mod:`racing_lib.plants.commonroad`: no drag, no ABS, a 0.4 rad/s steering rate
+limit, a governed top speed) are identified with the same settings
+(``tests/test_foreign_plant.py``). A car that is lost anyway stops the run with one
+:class:`~racing_lib.errors.PlantError` naming the manoeuvre and what to change; data that cannot
+determine a parameter raise a :class:`~racing_lib.errors.ModelError` that says which manoeuvre
+ran, what it reached, and what to change (or which manoeuvre to add, if it did not run).
+:attr:`IdentificationResult.success` and the verdict of :meth:`IdentificationResult.report`
+judge each sub-model's R^2.
 
 Derivatives. The commands are held constant over each 0.1 s control period (zero-order hold) and
 the plant is integrated finely in between, so the observed states are exact samples of a smooth

@@ -17,7 +17,12 @@ from typing import Any
 
 from racing_lib.config import fast_mode
 from racing_lib.errors import ModelError
-from racing_lib.experiments.sysid.lateral import _fit_lateral, _fit_steer_rate, _front_force_sin
+from racing_lib.experiments.sysid.lateral import (
+    _fit_braking_stability,
+    _fit_lateral,
+    _fit_steer_rate,
+    _front_force_sin,
+)
 from racing_lib.experiments.sysid.limits import collect_logs
 from racing_lib.experiments.sysid.longitudinal import (
     _fit_brake_limit,
@@ -34,7 +39,7 @@ from racing_lib.experiments.sysid.samples import (
     _samples,
 )
 from racing_lib.io import atomic_write_json
-from racing_lib.model import GRIP_MARGIN, CarModel, ModelParams, X
+from racing_lib.model import GRIP_MARGIN, CarModel, ModelOptions, ModelParams, X
 from racing_lib.model.drive import Drive
 from racing_lib.model.identified import shipped_fit_path
 from racing_lib.vehicle import (
@@ -135,6 +140,16 @@ class IdentificationResult:
     v_top_governed : bool
         The car stopped accelerating at ``v_top`` (a governed top speed, which plans must keep
         below), rather than the run ending while it still gained speed.
+    braking_stable : bool or None
+        Whether a small yaw died out when the car braked with the steering held (the
+        braking-stability manoeuvre; None: not in the logs). A car that diverged gets plans
+        that keep the model's lateral dynamics stable (:meth:`car_model`).
+    stability_margin : float or None
+        For a car that diverged: how far left of zero the plans keep the model's lateral
+        eigenvalues, 1/s: by how much the car diverged faster than the model predicted.
+    braking_growth : tuple of float
+        The yaw's growth rate in the braking-stability run, measured and as the identified model
+        predicts it over the same samples, 1/s (NaN without the run).
     """
 
     params: ModelParams
@@ -148,6 +163,9 @@ class IdentificationResult:
     steer_max: float | None = None
     v_top: float = math.nan
     v_top_governed: bool = False
+    braking_stable: bool | None = None
+    stability_margin: float | None = None
+    braking_growth: tuple[float, float] = (math.nan, math.nan)
 
     @property
     def success(self) -> bool:
@@ -190,8 +208,9 @@ class IdentificationResult:
         The steering actuator is the identified one: its lag ``steer_tau`` (s), its rate limit
         ``steer_rate_max`` (rad/s) when the steering-rate manoeuvre found one, and the data
         sheet's angle limit ``steer_max`` (rad) when it was given to :func:`identify`; the top
-        speed ``v_top`` (m/s) where the full-throttle run found a governed one. What was not
-        identified keeps :class:`~racing_lib.model.CarModel`'s default.
+        speed ``v_top`` (m/s) where the full-throttle run found a governed one; laterally stable
+        plans (``lateral_stability``) for a car that diverged in yaw when it braked with the
+        steering held. What was not identified keeps :class:`~racing_lib.model.CarModel`'s default.
         """
         actuator: dict[str, Any] = {"steer_tau": self.steer_tau}
         if math.isfinite(self.steer_rate_max):
@@ -200,6 +219,8 @@ class IdentificationResult:
             actuator["steer_max"] = self.steer_max
         if self.v_top_governed and math.isfinite(self.v_top):
             actuator["v_top"] = self.v_top
+        if self.braking_stable is False and self.stability_margin is not None:
+            actuator["lateral_stability"] = self.stability_margin
         return CarModel(self.params, grip_margin=grip_margin, **(actuator | fields))
 
     def value(self, name: str) -> float:
@@ -338,6 +359,9 @@ def identify(
         steer_max=None if sheet_steer is None else float(sheet_steer),
         v_top=limits["top speed"],
         v_top_governed=bool(limits["top speed governed"]),
+        braking_stable=limits["braking stable"],
+        stability_margin=limits["stability margin"],
+        braking_growth=limits["braking growth"],
     )
 
 
@@ -425,7 +449,8 @@ def _fit_limits(
     """Step 5: the actuators' limits (steering rate, power, top speed), after the model's fits.
 
     Their manoeuvres feed no other fit. The full-throttle run's power limit enters the pedal map
-    only when the map's own fit found none (its laps and steps never ran out of power).
+    when the map's own fit found none (its laps and steps never ran out of power) or a larger
+    one; the braking-stability run says whether plans must keep the lateral dynamics stable.
 
     Parameters
     ----------
@@ -443,7 +468,10 @@ def _fit_limits(
     fitted : ModelParams
         With the power limit, if it was missing.
     limits : dict
-        ``steer_rate_max`` (rad/s), ``p_thr (full throttle)`` (W/kg), ``top speed`` (m/s).
+        ``steer_rate_max`` (rad/s), ``p_thr (full throttle)`` (W/kg), ``top speed`` (m/s),
+        ``top speed governed``, ``braking stable`` (bool, None without the run) and
+        ``stability margin`` (1/s, None for a stable car) and ``braking growth`` (measured and
+        model growth rates, 1/s).
     """
     rate, rate_stats, note = _fit_steer_rate(fitted, S, tyres)
     notes.append(note)
@@ -453,10 +481,27 @@ def _fit_limits(
     notes.append(note)
     if full_stats is not None:
         fits[full_stats.name] = full_stats
-    if fitted.pedal.p_thr is None and math.isfinite(full["p_thr"]):
-        fitted = fitted.replace(pedal=dataclasses.replace(fitted.pedal, p_thr=full["p_thr"]))
-        notes.append("the pedal map's power limit is the full-throttle run's")
+    measured = full["p_thr"]
+    if math.isfinite(measured) and (fitted.pedal.p_thr is None or measured < fitted.pedal.p_thr):
+        # The full-throttle run measures the power directly; the map's fit only infers it from
+        # partial throttle through the map's form (pedal times a capped gain). A car whose
+        # partial throttle is not that form (CommonRoad's: min(pedal a_max, P / v)) gets a map
+        # that promises more power than full throttle gave (114 against 82 W/kg for the BMW),
+        # and a plan whose straights the car cannot drive (2-4 m/s short at their ends).
+        if fitted.pedal.p_thr is not None:
+            notes.append(
+                f"the pedal map's power limit, {fitted.pedal.p_thr:.1f} W/kg, is more than full "
+                f"throttle gave ({measured:.1f} W/kg): the map keeps the measured one"
+            )
+        else:
+            notes.append("the pedal map's power limit is the full-throttle run's")
+        fitted = fitted.replace(pedal=dataclasses.replace(fitted.pedal, p_thr=measured))
+    stability, note = _fit_braking_stability(fitted, ModelOptions(), S)
+    notes.append(note)
     return fitted, {
+        "braking stable": stability["stable"],
+        "stability margin": stability["margin"],
+        "braking growth": (stability["growth"], stability["model_growth"]),
         "steer_rate_max": rate,
         "p_thr (full throttle)": full["p_thr"],
         "top speed": full["v_top"],

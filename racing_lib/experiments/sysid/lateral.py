@@ -22,7 +22,7 @@ from racing_lib.experiments.sysid.samples import (
     _Samples,
     _subset,
 )
-from racing_lib.model import ModelParams
+from racing_lib.model import ModelOptions, ModelParams
 from racing_lib.vehicle import (
     longitudinal_load_transfer,
     pacejka_lateral,
@@ -30,6 +30,9 @@ from racing_lib.vehicle import (
 )
 
 __all__ = ["rate_limited_steering"]
+
+#: The braking-stability run is judged while the speed is above this share of its start (-).
+_JUDGED_SPEED_SHARE = 0.8
 
 
 def _axle_loads(kp: ModelParams, S: _Samples) -> tuple[np.ndarray, np.ndarray]:
@@ -433,3 +436,88 @@ def _fit_steer_rate(
             f"steps of {step:.3f} rad (lateral balance RMS {stats.rms:.3g} m/s^2)"
         ),
     )
+
+
+def _fit_braking_stability(
+    fitted: ModelParams, options: ModelOptions, S: _Samples
+) -> tuple[dict[str, Any], str]:
+    """Step 5d: does a small yaw grow under braking, and does the model know? The stability run.
+
+    The run (:func:`racing_lib.experiments.sysid.braking_stability_log`) brakes with the
+    steering held after a kick. The yaw rate's deviation from the circle's steady state,
+    ``dev = r - v_x kappa`` (``kappa`` the ``r / v_x`` of the second before the brake), either
+    dies out or grows. It is judged from half a second after the kick until the brake lets go
+    or the speed falls below ``_JUDGED_SPEED_SHARE`` of the braking's start (slower, the held
+    steering's own steady state drifts from the circle's): the growth rate ``lambda`` (1/s) is
+    the least-squares fit of ``d(dev)/dt = lambda dev``. The car *diverged* when ``lambda > 0``
+    and the deviation reached 0.05 rad/s (far above the noise).
+
+    The model's growth rate over the same samples, weighted alike (``dev^2``), is the largest
+    real part of the identified model's lateral eigenvalues at each sample's speed and
+    deceleration (:func:`racing_lib.model.lateral.lateral_linearization`). Where the car
+    diverged faster than the model says, the difference is the model's error in exactly the
+    quantity the planner must respect: plans keep the model's eigenvalues at least that far left
+    of zero (:attr:`racing_lib.model.CarModel.lateral_stability`, 1/s).
+
+    Returns
+    -------
+    result : dict
+        ``stable`` (True, False, or None without the run), ``growth`` and ``model_growth``
+        (1/s), ``v`` (m/s) and ``a_x`` (m/s^2, negative) where the deviation was largest, and
+        ``margin``: the stability margin for the plans (1/s; None for a stable car).
+    note : str
+        What was found, for the result's notes.
+    """
+    nan = math.nan
+    logs = [(a, b) for a, b in S.bounds if S.kind[a] == "braking-stability"]
+    found: dict[str, Any] = {"stable": None, "growth": nan, "model_growth": nan}
+    found |= {"v": nan, "a_x": nan, "margin": None}
+    if not logs:
+        return found, (
+            "no braking stability judged: the logs hold no 'braking-stability' manoeuvre "
+            "(racing_lib.experiments.sysid.braking_stability_log)"
+        )
+    a, b = logs[0]
+    braking = np.flatnonzero(S.pedal[a:b] < 0.0) + a
+    k0 = int(braking[0]) if braking.size else b
+    judged = (np.arange(a, b) >= k0 + 5) & (S.pedal[a:b] < 0.0)
+    judged &= S.vx[a:b] >= _JUDGED_SPEED_SHARE * S.vx[min(k0, b - 1)]
+    run = np.arange(a, b)[judged]
+    # The judged stretch ends at the first gap (the brake let go, or the car slowed down).
+    gaps = np.flatnonzero(np.diff(run) > 1)
+    run = run[: gaps[0] + 1] if gaps.size else run
+    if run.size < 7:
+        return found, (
+            f"no braking stability judged: the braking-stability run gave {run.size} periods of "
+            "braking at speed (need >= 7); a higher speed or a slower brake ramp gives more "
+            "(braking_stability_log(v_test=..., ramp=...))"
+        )
+    before = np.arange(max(k0 - 10, a), k0)
+    kappa = float(np.median(S.r[before] / np.maximum(S.vx[before], 1.0)))
+    dev = S.r[run] - S.vx[run] * kappa
+    dev_dot = S.dr[run] - S.dvx[run] * kappa
+    weight = dev**2 / max(float(np.sum(dev**2)), 1e-12)
+    found["growth"] = float(np.dot(dev, dev_dot) / max(float(np.dot(dev, dev)), 1e-12))
+    found["stable"] = not (found["growth"] > 0.0 and float(np.max(np.abs(dev))) > 0.05)
+    from racing_lib.model.lateral import lateral_linearization  # python-control: load it late
+
+    model = [
+        float(np.max(np.linalg.eigvals(lateral_linearization(fitted, v, options, accel=ax).A).real))
+        for v, ax in zip(np.maximum(S.vx[run], 2.0), S.dvx[run], strict=True)
+    ]
+    found["model_growth"] = float(np.dot(weight, model))
+    peak = int(run[np.argmax(np.abs(dev))])
+    found["v"], found["a_x"] = float(S.vx[peak]), float(S.dvx[peak])
+    verdict = "stayed stable" if found["stable"] else "diverged in yaw"
+    note = (
+        f"braking with the steering held ({found['v']:.1f} m/s, {found['a_x']:+.2f} m/s^2 at "
+        f"the largest yaw deviation, {np.max(np.abs(dev)):.3f} rad/s), the car {verdict}: "
+        f"growth {found['growth']:+.2f} 1/s, the model's {found['model_growth']:+.2f} 1/s"
+    )
+    if not found["stable"]:
+        found["margin"] = max(found["growth"] - found["model_growth"], 0.0)
+        note += (
+            f"; plans keep the model's lateral eigenvalues below -{found['margin']:.2f} 1/s "
+            "(CarModel.lateral_stability)"
+        )
+    return found, note

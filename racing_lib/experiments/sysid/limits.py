@@ -1,6 +1,6 @@
 """The manoeuvres that find the actuators' limits, and :func:`collect_logs`, which drives them all.
 
-Two runs a team does with a car it has never driven, beside those of
+Three runs a team does with a car it has never driven, beside those of
 :mod:`racing_lib.experiments.sysid.manoeuvres`:
 
 * **steering-rate**: at a low speed (the tyres stay nearly linear), large steering steps held
@@ -10,7 +10,10 @@ Two runs a team does with a car it has never driven, beside those of
   is up: the acceleration against speed gives the power per mass and where the car stops
   accelerating, its top speed (:func:`full_throttle_log`).
 
-Neither feeds the fits of the planning model's tyres, drag or pedal map, so adding them left the
+* **braking-stability**: braking from speed with the steering held: whether a small yaw dies
+  out or grows by itself (:func:`braking_stability_log`).
+
+None feeds the fits of the planning model's tyres, drag or pedal map, so adding them left the
 simulated car's identification exactly as it was; they identify ``steer_rate_max``, the top speed,
 and the power limit when the pedal map's own data cannot tell one.
 """
@@ -28,6 +31,7 @@ from racing_lib.experiments.sysid.manoeuvres import (
     _record,
     _SpeedHold,
     _start,
+    _topped_out,
     _watch,
     braking_logs,
     circle_logs,
@@ -40,7 +44,7 @@ from racing_lib.experiments.sysid.watch import ManoeuvreSettings
 from racing_lib.model.drive import Drive
 from racing_lib.vehicle import VehicleParams
 
-__all__ = ["collect_logs", "full_throttle_log", "steering_rate_log"]
+__all__ = ["braking_stability_log", "collect_logs", "full_throttle_log", "steering_rate_log"]
 
 
 def steering_rate_log(
@@ -139,6 +143,73 @@ def full_throttle_log(
     )
 
 
+def braking_stability_log(
+    car: CarUnderTest | VehicleParams | None = None,
+    settings: ManoeuvreSettings | None = None,
+    v_test: float = 45.0,
+    ramp: float = 4.0,
+    kick: float = 0.03,
+) -> Drive:
+    """Braking with the steering held, to see whether a small yaw dies out or grows by itself.
+
+    A car with the same tyres front and rear and a high centre of gravity unloads its rear axle
+    under braking until it oversteers: any small yaw then grows by itself (CommonRoad's BMW 320i
+    at 45 m/s and 3.5 m/s^2, its yaw rate doubling every 0.4 s). The plans must know, since they
+    brake into corners; the tracking controller cannot always catch such a car in time.
+
+    On the 1.5 km proving ground, full throttle from 15 m/s to ``v_test`` (m/s, or the car's top
+    speed if lower) with pure pursuit; then the steering is held where the follower left it,
+    with a short kick that gives a yaw rate of ``kick`` rad/s kinematically, and the brake pedal
+    ramps from 0 to ``-settings.min_brake`` in ``ramp`` s. A stable car lets the kick die out; an
+    unstable one turns it into a growing yaw rate until the watchdog's yaw band trips, which
+    releases the brake and gives the steering back to the follower (with its yaw damper). The
+    run ends at 15 m/s, or 3 s after a trip.
+    """
+    st = ManoeuvreSettings() if settings is None else settings
+    spec = _as_car(car)
+    wheelbase = float(spec.known.l_f + spec.known.l_r)
+    track = _proving_ground(1500.0, 30.0, "braking-stability circle")
+    plant, obs0 = _start(spec, track, start_speed=15.0, seed=None)
+    ctrl = _follower(track)
+    ctrl.reset(obs0)
+    watch = _watch(spec, st, 1.0 / 1500.0, plant.dt)
+    seen: list[float] = []
+    brake = {"from": -1, "steer": 0.0, "pulse": 0.0, "trip": -1}
+    n_kick = max(int(round(0.2 / plant.dt)), 1)
+
+    def policy(obs: Any, k: int) -> tuple[float, float]:
+        seen.append(float(obs.vx))
+        follow = watch.steer(obs, ctrl.step(obs).steer)
+        if brake["from"] < 0 and (obs.vx >= v_test or _topped_out(seen)):
+            brake["from"], brake["steer"] = k, follow
+            brake["pulse"] = kick * wheelbase / max(float(obs.vx), 5.0)
+        if brake["from"] < 0:
+            return follow, watch(obs, 1.0)
+        if watch.tripped:
+            if brake["trip"] < 0:
+                brake["trip"] = k
+            return follow, watch(obs, 0.0)
+        age = k - brake["from"]
+        steer = brake["steer"] + (brake["pulse"] if age < n_kick else 0.0)
+        pedal = -st.min_brake * min(1.0, age * plant.dt / ramp)
+        return steer, watch(obs, pedal)
+
+    def stop(obs: Any) -> bool:
+        if brake["trip"] >= 0:
+            return (len(seen) - brake["trip"]) * plant.dt > 3.0
+        return brake["from"] >= 0 and obs.vx < 15.0
+
+    return _record(
+        plant,
+        obs0,
+        policy,
+        int(round(3.0 * st.full_throttle_time / plant.dt)),
+        f"braking with the steering held from {v_test:.0f} m/s",
+        "braking-stability",
+        stop=stop,
+    )
+
+
 def collect_logs(
     seed: int = 0,
     params: VehicleParams | None = None,
@@ -181,6 +252,7 @@ def collect_logs(
         logs += braking_logs(test_car, speeds=(45.0, 35.0), settings=st)
         logs.append(steering_rate_log(test_car, st))
         logs.append(full_throttle_log(test_car, st))
+        logs.append(braking_stability_log(test_car, st))
     else:
         logs.append(coast_down_log(test_car, seed, settings=st))
         logs += circle_logs(test_car, seed, settings=st)
@@ -189,4 +261,5 @@ def collect_logs(
         logs += braking_logs(test_car, settings=st)
         logs.append(steering_rate_log(test_car, st))
         logs.append(full_throttle_log(test_car, st))
+        logs.append(braking_stability_log(test_car, st))
     return logs

@@ -40,6 +40,7 @@ MANOEUVRES: dict[str, str] = {
     "braking": "full brake from several speeds on a long, nearly straight road (braking limit)",
     "steering-rate": "large steering steps at low speed (the steering actuator's rate limit)",
     "full-throttle": "full throttle until the speed stops rising (power limit, top speed)",
+    "braking-stability": "braking from speed with the steering held (does a small yaw grow?)",
 }
 
 
@@ -94,7 +95,13 @@ _REMEDY = {
     "steering-rate": "a lower speed or smaller steps (ManoeuvreSettings.steer_rate_speed, "
     "steer_rate_ay)",
     "full-throttle": "a shorter run (ManoeuvreSettings.full_throttle_time)",
+    "braking-stability": "a lower speed (braking_stability_log(v_test=...)) or a tighter yaw "
+    "band (ManoeuvreSettings.yaw_limit)",
 }
+
+
+class LostCar(PlantError):
+    """A manoeuvre lost the car (it spun or left the road): the plant itself still works."""
 
 
 def _checked_step(plant: Any, steer: float, pedal: float, name: str, kind: str) -> Any:
@@ -108,7 +115,7 @@ def _checked_step(plant: Any, steer: float, pedal: float, name: str, kind: str) 
     try:
         obs = plant.step(steer, pedal)
     except PlantError as exc:
-        raise PlantError(
+        raise LostCar(
             f"the '{kind}' manoeuvre ({name}) lost the car: {exc} Try "
             f"{_REMEDY.get(kind, 'a gentler manoeuvre')}."
         ) from exc
@@ -259,6 +266,9 @@ def coast_down_log(
 ) -> Drive:
     """Coast-down: full throttle to ``v_high`` (m/s), then pedal 0 until ``v_low`` (m/s).
 
+    A car that cannot reach ``v_high`` coasts from its top speed (the speed full throttle stopped
+    raising, :func:`_topped_out`).
+
     Driven on a 1.5 km radius circle (lateral acceleration below 1.2 m/s^2 at 42 m/s, so the
     steering's share of the deceleration is tiny and is still accounted for). Only the pedal-0
     part is used for drag and rolling resistance; the run-up is pedal-map data. The run-up's
@@ -279,9 +289,13 @@ def coast_down_log(
     watch = _watch(car, settings, 1.0 / 1500.0, plant.dt, slow_down=True)
 
     coast: list[float] = []  # speeds since the coast began
+    run_up: list[float] = []  # speeds of the full-throttle run-up
 
     def policy(obs: Any, k: int) -> tuple[float, float]:
-        if obs.vx >= min(v_high, watch.v_cap - 0.5):
+        run_up.append(float(obs.vx))
+        # A car whose top speed is below v_high (CommonRoad's VW van: 41.7 m/s) coasts from
+        # its top speed: without this it never coasted at all and left nothing to fit.
+        if obs.vx >= min(v_high, watch.v_cap - 0.5) or _topped_out(run_up):
             phase["coast"] = True
         return watch.steer(obs, ctrl.step(obs).steer), watch(obs, 0.0 if phase["coast"] else 1.0)
 
@@ -294,6 +308,11 @@ def coast_down_log(
         "coast-down",
         stop=lambda o: phase["coast"] and (o.vx < v_low or _coasts_on(o, coast)),
     )
+
+
+def _topped_out(speeds: list[float], window: int = 20) -> bool:
+    """Whether full throttle stopped adding speed: less than 0.1 m/s in ``window`` periods."""
+    return len(speeds) > window and speeds[-1] - speeds[-window - 1] < 0.1
 
 
 def _coasts_on(obs: Any, speeds: list[float], window: int = 200) -> bool:
@@ -339,7 +358,7 @@ def braking_logs(
         def policy(obs: Any, k: int, v_high=v_high, ctrl=ctrl, phase=phase, watch=watch, v=seen):
             v.append(float(obs.vx))
             # At v_high, or at the car's top speed if lower (no gain in the last 2 s).
-            if obs.vx >= v_high or (len(v) > 20 and v[-1] - v[-21] < 0.1):
+            if obs.vx >= v_high or _topped_out(v):
                 phase["brake"] = True
             steer = watch.steer(obs, ctrl.step(obs).steer)
             return steer, watch(obs, -1.0 if phase["brake"] else 1.0)
@@ -507,6 +526,44 @@ def _step_command(
     return steer, sign[0] * pl[k] * (1.0 if sign[0] > 0.0 else 0.5)
 
 
+def _lap_log(
+    spec: CarUnderTest,
+    seed: int,
+    name: str,
+    scale: float,
+    max_time: float,
+    settings: ManoeuvreSettings,
+) -> Drive:
+    """One nominal-controller lap of track ``name`` at ``scale`` of its speed profile."""
+    track = load_track(name)
+    s = track.centerline.sample(ds=2.0)
+    prof = speed_profile(s, track.centerline.curvature(s), params=spec.known, length=track.length)
+    plant, obs0 = _start(spec, track, start_speed=float(scale * prof(0.0)), seed=seed)
+    ctrl = NominalController(
+        track.centerline,
+        lambda si, prof=prof: float(prof(si)),
+        NominalSettings(speed_scale=scale),
+    )
+    ctrl.reset(obs0)
+    tracker = FrenetTracker(track.centerline)
+
+    def grade(x: float, y: float) -> float:
+        return float(track.grade(tracker.project(x, y)[0]))
+
+    # The yaw rate is not judged (pure pursuit cuts the corners and scrapes the walls);
+    # the path's curvature sets the body-slip band and the yaw damper.
+    watch = _watch(spec, settings, 0.0, plant.dt, True, watch_yaw=False)
+    follow = FrenetTracker(track.centerline)
+
+    def policy(obs: Any, k: int) -> tuple[float, float]:
+        cmd = ctrl.step(obs)
+        watch.kappa = float(track.centerline.curvature(follow.project(obs.x, obs.y)[0]))
+        return watch.steer(obs, cmd.steer), watch(obs, cmd.pedal)
+
+    n = int(round(min(max_time, 1.05 * prof.lap_time / scale) / plant.dt))
+    return _record(plant, obs0, policy, n, f"lap {name} x{scale:.2f}", "laps", grade=grade)
+
+
 def lap_logs(
     car: CarUnderTest | VehicleParams | None = None,
     seed: int = 0,
@@ -514,6 +571,7 @@ def lap_logs(
     scalings: Sequence[float] = (0.6, 0.8),
     max_time: float = 200.0,
     settings: ManoeuvreSettings | None = None,
+    min_scaling: float = 0.4,
 ) -> list[Drive]:
     """Nominal-controller laps of the built-in tracks at fractions of the track's speed profile.
 
@@ -522,41 +580,28 @@ def lap_logs(
     :func:`racing_lib.planning.speed.speed_profile`, m/s. The pedal is watched for side slip
     beyond the kinematic slip of the centre line's curvature
     (:class:`~racing_lib.experiments.sysid.watch.ManoeuvreSettings`).
+
+    The profile comes from the data sheet, which knows nothing of the car's handling: a lap that
+    loses the car (CommonRoad's Ford Escort spins on the expressway at 0.70 and 0.75, not at 0.65)
+    is driven again at ``speed_backoff`` times its share, as a test driver who spun would, down
+    to ``min_scaling``; the log's name gives the share it was driven at.
+
+    Raises
+    ------
+    PlantError
+        A lap lost the car at every share down to ``min_scaling``.
     """
+    st = settings or ManoeuvreSettings()
     spec = _as_car(car)
-    vp = spec.known
     logs = []
     for i, name in enumerate(tracks):
-        track = load_track(name)
-        s = track.centerline.sample(ds=2.0)
-        prof = speed_profile(s, track.centerline.curvature(s), params=vp, length=track.length)
         for j, scale in enumerate(scalings):
-            plant, obs0 = _start(
-                spec, track, start_speed=float(scale * prof(0.0)), seed=seed + 10 * i + j
-            )
-            ctrl = NominalController(
-                track.centerline,
-                lambda si, prof=prof: float(prof(si)),
-                NominalSettings(speed_scale=scale),
-            )
-            ctrl.reset(obs0)
-            tracker = FrenetTracker(track.centerline)
-
-            def grade(x: float, y: float, tracker=tracker, track=track) -> float:
-                return float(track.grade(tracker.project(x, y)[0]))
-
-            # The yaw rate is not judged (pure pursuit cuts the corners and scrapes the walls);
-            # the path's curvature sets the body-slip band and the yaw damper.
-            watch = _watch(spec, settings, 0.0, plant.dt, True, watch_yaw=False)
-            follow = FrenetTracker(track.centerline)
-
-            def policy(obs: Any, k: int, ctrl=ctrl, w=watch, f=follow, track=track):
-                cmd = ctrl.step(obs)
-                w.kappa = float(track.centerline.curvature(f.project(obs.x, obs.y)[0]))
-                return w.steer(obs, cmd.steer), w(obs, cmd.pedal)
-
-            n = int(round(min(max_time, 1.05 * prof.lap_time / scale) / plant.dt))
-            logs.append(
-                _record(plant, obs0, policy, n, f"lap {name} x{scale:.2f}", "laps", grade=grade)
-            )
+            while True:
+                try:
+                    logs.append(_lap_log(spec, seed + 10 * i + j, name, scale, max_time, st))
+                    break
+                except LostCar:
+                    scale *= st.speed_backoff
+                    if scale < min_scaling:
+                        raise
     return logs
