@@ -290,6 +290,17 @@ def _nodes(res) -> tuple[np.ndarray, np.ndarray]:
     return states, np.column_stack([sol["delta"], sol["ax"]])
 
 
+def test_a_car_that_oversteers_under_braking_fails_the_test_there():
+    from racing_lib.model import lateral_eigenvalue_test
+
+    test = lateral_eigenvalue_test(_OVERSTEERING, ModelOptions())
+    xi = [40.0, 0, 0, 0, 0, 0]
+    rolling = [float(x) for x in test(xi, [0.0, 0.0], 0.0, 0.0, 0.0)]
+    braking = [float(x) for x in test(xi, [0.0, -6.0], 0.0, 0.0, 0.0)]
+    assert rolling[0] > 0.0 and rolling[1] < 0.0  # stable
+    assert braking[0] < 0.0  # a real eigenvalue in the right half plane: it diverges
+
+
 @pytest.mark.slow
 def test_a_plan_with_a_stability_margin_keeps_the_lateral_dynamics_stable():
     from racing_lib.tracks import load_track
@@ -320,3 +331,18 @@ def test_a_plan_with_a_stability_margin_keeps_the_lateral_dynamics_stable():
     assert np.max(rate) <= 0.4 * (1 + 1e-4)
     # ... and it costs lap time, not much (about 1.5 %).
     assert free.lap_time < bound.lap_time < 1.05 * free.lap_time
+
+
+@pytest.mark.parametrize(
+    "bad",
+    [
+        {"lateral_stability": -1.0},
+        {"lateral_stability": True},
+        {"steer_rate": 0.0},
+        {"steer_rate": float("nan")},
+    ],  # fmt: skip
+)
+def test_a_stability_or_steering_bound_that_is_no_number_is_refused(bad):
+    name = next(iter(bad))
+    with pytest.raises(PlanningError, match=f"TimeOptimalSettings.{name} must be a finite"):
+        TimeOptimalSettings(**bad)

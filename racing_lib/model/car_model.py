@@ -76,11 +76,14 @@ class CarModel:
         A car with a governed top speed (identified at full throttle) gives no acceleration
         beyond it, whatever the pedal says; default :data:`DEFAULT_V_TOP`.
     lateral_stability : float or None
-        Plan only where the model's lateral dynamics are stable, with their eigenvalues at least
-        this far left of zero, 1/s (:attr:`racing_lib.planning.TimeOptimalSettings.\
-lateral_stability`). Set by identification for a car that diverged in yaw when it braked
-        with the steering held; the margin is how much faster it diverged than the model said.
-        None (default): no such bound, as for the simulated car, which stays stable there.
+        The plans' stability margin, 1/s: they keep the model's lateral dynamics stable, with no
+        eigenvalue between minus this margin and zero unless both are there (under braking, the
+        eigenvalue that moves towards zero stays left of the margin; see
+        :attr:`racing_lib.planning.TimeOptimalSettings.lateral_stability`), and the steering
+        within its rate limit. Set by identification for a car that diverged in yaw when it
+        braked with the steering held: the margin is how much faster it diverged than the
+        model said. None (default): no such bound, as for the simulated car, which stays
+        stable there.
 
     Examples
     --------
@@ -182,7 +185,7 @@ lateral_stability`). Set by identification for a car that diverged in yaw when i
         stable = (
             ""
             if self.lateral_stability is None
-            else f", lateral eigenvalues below -{self.lateral_stability:.2f} 1/s"
+            else f", stability margin {self.lateral_stability:.2f} 1/s"
         )
         return (
             f"mu {self.params.mu:.3f}, {self.options.label()}, steering lag "

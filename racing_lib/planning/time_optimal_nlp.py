@@ -82,8 +82,8 @@ class IntervalFunctions:
     Attributes
     ----------
     con : casadi.Function
-        The interval's constraints: the 5 scaled trapezoidal defects, then node a's path
-        constraints.
+        The interval's constraints: the 5 scaled trapezoidal defects, the steering-rate row
+        (with ``steer_rate`` settings), then node a's path constraints.
     con_jac : casadi.Function
         Nonzeros of the constraints' Jacobian with respect to ``(w_a, w_b)``, in the order of
         ``jac_sparsity``. With ``jit`` settings, where a C compiler works, this and the other two
@@ -99,9 +99,10 @@ class IntervalFunctions:
     inv_sdot : casadi.Function
         One node's ``1 / s_dot`` (s/m) from ``(w, d)``.
     jac_sparsity, hess_sparsity : casadi.Sparsity
-        Structure of the interval's Jacobian ((5 + n_path) x 14) and Hessian (14 x 14).
+        Structure of the interval's Jacobian ((5 + rows after the defects) x 14) and Hessian
+        (14 x 14).
     lb_path, ub_path : numpy.ndarray
-        Bounds of one node's path constraints.
+        Bounds of one interval's constraints after its defects.
     """
 
     con: ca.Function
@@ -218,18 +219,23 @@ def _node_function(
     path, lb, ub = _path_constraints(params, st, z, xi, u, terms)
     if st.lateral_stability is not None:
         # Stable (the block's determinant and trace: both eigenvalues left of zero), and both
-        # on one side of -lateral_stability (the shifted determinant). Under braking, where one
-        # eigenvalue moves right while the other stays far left (the divergence identification
-        # measures), that keeps the first left of -lateral_stability; near the tyres' peak in
-        # a corner both slow down together, and there the plain stability suffices (the shifted
-        # trace bound every such corner and cost 3 % of lap time that the laps did not need).
-        test = lateral_eigenvalue_test(params, options)
-        det, trace = test(xi, u, d[0], d[1], 0.0)
-        shifted = test(xi, u, d[0], d[1], st.lateral_stability)[0]
-        rows = [det / DET_SCALE, trace / TRACE_SCALE, shifted / DET_SCALE]
+        # on one side of -lateral_stability (the shifted determinant, det + sigma trace +
+        # sigma^2). Under braking, where one eigenvalue moves right while the other stays far
+        # left (the divergence identification measures), that keeps the first left of
+        # -lateral_stability; near the tyres' peak in a corner both may slow down together,
+        # and there plain stability suffices (a shifted trace bound every such corner and cost
+        # 3 % of lap time that the laps did not need).
+        det, trace = lateral_eigenvalue_test(params, options)(xi, u, d[0], d[1], 0.0)
+        sigma = st.lateral_stability
+        rows = [det / DET_SCALE, trace / TRACE_SCALE]
+        lb_rows, ub_rows = [0.0, -np.inf], [np.inf, 0.0]
+        if sigma > 0.0:  # at 0 the shifted row is the first one again
+            rows.append((det + sigma * trace + sigma**2) / DET_SCALE)
+            lb_rows.append(0.0)
+            ub_rows.append(np.inf)
         path[-1:-1] = rows  # the speed row stays last
-        lb = np.concatenate([lb[:-1], [0.0, -np.inf, 0.0], lb[-1:]])
-        ub = np.concatenate([ub[:-1], [np.inf, 0.0, np.inf], ub[-1:]])
+        lb = np.concatenate([lb[:-1], lb_rows, lb[-1:]])
+        ub = np.concatenate([ub[:-1], ub_rows, ub[-1:]])
     node = ca.Function("node", [w, d], [f, ca.vertcat(*path), 1.0 / terms["s_dot"]])
     return node, lb, ub
 

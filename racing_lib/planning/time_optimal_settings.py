@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+import math
+import numbers
 from dataclasses import dataclass, field
 from typing import Protocol
 
 import numpy as np
 
+from racing_lib.errors import PlanningError
 from racing_lib.planning.grid import DEFAULT_CAR_WIDTH, TrackGrid
 from racing_lib.planning.trajectory import Trajectory
 
@@ -98,7 +101,8 @@ class TimeOptimalSettings:
         rate-limited steering can catch it, and the time-optimal plan goes there, since in the
         model it costs nothing. None (default): no such rows, as in the paper;
         :func:`racing_lib.planning.plan` takes the model's
-        (:attr:`racing_lib.model.CarModel.lateral_stability`).
+        (:attr:`racing_lib.model.CarModel.lateral_stability`) with its steering rate. Set here,
+        set ``steer_rate`` too: without it the optimum weaves (see there).
     steer_rate : float or None
         The steering actuator's rate limit, rad/s: between two nodes the steering angle changes
         by at most this times the time the car takes from one to the other. None (default): no
@@ -166,6 +170,23 @@ class TimeOptimalSettings:
     mu_min: float = 0.1
     graph: str = "structured"
     jit: bool = True
+
+    def __post_init__(self) -> None:
+        _check_bound("lateral_stability", self.lateral_stability, "1/s", zero_ok=True)
+        _check_bound("steer_rate", self.steer_rate, "rad/s", zero_ok=False)
+
+
+def _check_bound(name: str, value: object, unit: str, zero_ok: bool) -> None:
+    """Refuse a bound that is not None or a finite number >= 0 (> 0 unless ``zero_ok``)."""
+    if value is None:
+        return
+    number = isinstance(value, numbers.Real) and not isinstance(value, bool | np.bool_)
+    if not number or not math.isfinite(value) or value < 0.0 or (value == 0.0 and not zero_ok):
+        rule = ">= 0" if zero_ok else "> 0"
+        raise PlanningError(
+            f"TimeOptimalSettings.{name} must be a finite number {rule} {unit}, or None for no "
+            f"bound; got {value!r}."
+        )
 
 
 @dataclass

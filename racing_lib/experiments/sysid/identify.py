@@ -145,8 +145,9 @@ class IdentificationResult:
         braking-stability manoeuvre; None: not in the logs). A car that diverged gets plans
         that keep the model's lateral dynamics stable (:meth:`car_model`).
     stability_margin : float or None
-        For a car that diverged: how far left of zero the plans keep the model's lateral
-        eigenvalues, 1/s: by how much the car diverged faster than the model predicted.
+        For a car that diverged: by how much faster it diverged than the model predicted, 1/s.
+        Its plans keep the model's lateral dynamics stable, with no eigenvalue between minus
+        this margin and zero unless both are (:attr:`racing_lib.model.CarModel.lateral_stability`).
     braking_growth : tuple of float
         The yaw's growth rate in the braking-stability run, measured and as the identified model
         predicts it over the same samples, 1/s (NaN without the run).
@@ -481,6 +482,8 @@ def _fit_limits(
     notes.append(note)
     if full_stats is not None:
         fits[full_stats.name] = full_stats
+    # Both are power per mass at full throttle: the map's hyperbola (its gain p_thr / v on top of
+    # the pedal-free m_0 + m_vx v, a few tenths of m/s^2) and the run's measured a_x v.
     measured = full["p_thr"]
     if math.isfinite(measured) and (fitted.pedal.p_thr is None or measured < fitted.pedal.p_thr):
         # The full-throttle run measures the power directly; the map's fit only infers it from

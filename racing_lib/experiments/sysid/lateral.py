@@ -446,7 +446,8 @@ def _fit_braking_stability(
     The run (:func:`racing_lib.experiments.sysid.braking_stability_log`) brakes with the
     steering held after a kick. The yaw rate's deviation from the circle's steady state,
     ``dev = r - v_x kappa`` (``kappa`` the ``r / v_x`` of the second before the brake), either
-    dies out or grows. It is judged from half a second after the kick until the brake lets go
+    dies out or grows. It is judged from the fifth period of braking (the kick and the first
+    half second of its response are over) until the brake lets go
     or the speed falls below ``_JUDGED_SPEED_SHARE`` of the braking's start (slower, the held
     steering's own steady state drifts from the circle's): the growth rate ``lambda`` (1/s) is
     the least-squares fit of ``d(dev)/dt = lambda dev``. The car *diverged* when ``lambda > 0``
@@ -456,8 +457,11 @@ def _fit_braking_stability(
     real part of the identified model's lateral eigenvalues at each sample's speed and
     deceleration (:func:`racing_lib.model.lateral.lateral_linearization`). Where the car
     diverged faster than the model says, the difference is the model's error in exactly the
-    quantity the planner must respect: plans keep the model's eigenvalues at least that far left
-    of zero (:attr:`racing_lib.model.CarModel.lateral_stability`, 1/s).
+    quantity the planner must respect: the plans' stability margin
+    (:attr:`racing_lib.model.CarModel.lateral_stability`, 1/s). The model here is the one
+    identified, around straight driving; the planner applies the margin to its own parameters
+    (the grip margin lowers the friction by 5 %) at the planned state, a small difference next
+    to the margin.
 
     Returns
     -------
@@ -517,7 +521,7 @@ def _fit_braking_stability(
     if not found["stable"]:
         found["margin"] = max(found["growth"] - found["model_growth"], 0.0)
         note += (
-            f"; plans keep the model's lateral eigenvalues below -{found['margin']:.2f} 1/s "
-            "(CarModel.lateral_stability)"
+            f"; plans keep the model's lateral dynamics stable with a margin of "
+            f"{found['margin']:.2f} 1/s (CarModel.lateral_stability)"
         )
     return found, note

@@ -15,7 +15,8 @@ Three runs a team does with a car it has never driven, beside those of
 
 None feeds the fits of the planning model's tyres, drag or pedal map, so adding them left the
 simulated car's identification exactly as it was; they identify ``steer_rate_max``, the top speed,
-and the power limit when the pedal map's own data cannot tell one.
+the power limit (which also caps the pedal map's, when that promises more), and whether plans need a
+stability margin.
 """
 
 from __future__ import annotations
@@ -174,18 +175,20 @@ def braking_stability_log(
     ctrl.reset(obs0)
     watch = _watch(spec, st, 1.0 / 1500.0, plant.dt)
     seen: list[float] = []
-    brake = {"from": -1, "steer": 0.0, "pulse": 0.0, "trip": -1}
+    # "trips": the watchdog's trips before the brake (a run-up that spun the wheels); only a
+    # trip after it ends the braking.
+    brake = {"from": -1, "steer": 0.0, "pulse": 0.0, "trip": -1, "trips": 0}
     n_kick = max(int(round(0.2 / plant.dt)), 1)
 
     def policy(obs: Any, k: int) -> tuple[float, float]:
         seen.append(float(obs.vx))
         follow = watch.steer(obs, ctrl.step(obs).steer)
         if brake["from"] < 0 and (obs.vx >= v_test or _topped_out(seen)):
-            brake["from"], brake["steer"] = k, follow
+            brake["from"], brake["steer"], brake["trips"] = k, follow, len(watch.events)
             brake["pulse"] = kick * wheelbase / max(float(obs.vx), 5.0)
         if brake["from"] < 0:
             return follow, watch(obs, 1.0)
-        if watch.tripped:
+        if len(watch.events) > brake["trips"]:
             if brake["trip"] < 0:
                 brake["trip"] = k
             return follow, watch(obs, 0.0)

@@ -182,8 +182,6 @@ def _best_throttle_form(S: _Samples, y: np.ndarray) -> tuple[str, float | None]:
         sse = float(np.sum((y - A @ coef) ** 2))
         if best is None or sse < best[0]:
             best = (sse, form, v_corner)
-        if v_corner is None:
-            break  # no power limit: the two forms are one
     assert best is not None
     return best[1], best[2]
 

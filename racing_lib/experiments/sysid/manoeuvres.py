@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 
 from racing_lib.control.nominal import NominalController, NominalSettings
-from racing_lib.errors import ModelError, PlantError
+from racing_lib.errors import ArgumentError, ModelError, PlantError
 from racing_lib.experiments.sysid.watch import ManoeuvreSettings, _Watchdog
 from racing_lib.geometry import FrenetTracker, Path, Track
 from racing_lib.interfaces import Plant
@@ -592,6 +592,12 @@ def lap_logs(
         A lap lost the car at every share down to ``min_scaling``.
     """
     st = settings or ManoeuvreSettings()
+    if not (0.0 < st.speed_backoff < 1.0 and min_scaling > 0.0):
+        raise ArgumentError(
+            f"lap_logs backs a lost lap off by ManoeuvreSettings.speed_backoff (in (0, 1), got "
+            f"{st.speed_backoff!r}) down to min_scaling (> 0, got {min_scaling!r}); pass such "
+            "values, or the retries would never end."
+        )
     spec = _as_car(car)
     logs = []
     for i, name in enumerate(tracks):
