@@ -133,8 +133,8 @@ def _shape_settings(st: TimeOptimalSettings) -> TimeOptimalSettings:
     grid or bounds share one cached set of interval functions.
     """
     shaping = ("w_ddelta", "w_dax", "slip_limit", "slip_force_share", "friction_ellipse")
-    shaping += ("drive_axle_circle", "uncertainty_margin", "pedal_limits", "lateral_stability")
-    shaping += ("steer_rate",)
+    shaping += ("drive_axle_circle", "uncertainty_margin", "pedal_limits")
+    shaping += ("lateral_stability", "steer_rate")
     kept = {name: getattr(st, name) for name in shaping}
     # Only the structured graph calls the derivative functions: the others need no compiler run.
     return TimeOptimalSettings(**kept, jit=st.jit and st.graph == "structured")

@@ -136,7 +136,7 @@ def full_throttle_log(
 
     def stop(obs: Any) -> bool:
         seen.append(float(obs.vx))
-        return len(seen) > 20 and seen[-1] - seen[-21] < 0.1
+        return _topped_out(seen)
 
     n = int(round(st.full_throttle_time / plant.dt))
     return _record(

@@ -529,15 +529,14 @@ def _step_command(
 def _lap_log(
     spec: CarUnderTest,
     seed: int,
-    name: str,
+    track: Track,
+    prof: Any,
     scale: float,
     max_time: float,
     settings: ManoeuvreSettings,
 ) -> Drive:
-    """One nominal-controller lap of track ``name`` at ``scale`` of its speed profile."""
-    track = load_track(name)
-    s = track.centerline.sample(ds=2.0)
-    prof = speed_profile(s, track.centerline.curvature(s), params=spec.known, length=track.length)
+    """One nominal-controller lap of ``track`` at ``scale`` of its speed profile ``prof``."""
+    name = track.name
     plant, obs0 = _start(spec, track, start_speed=float(scale * prof(0.0)), seed=seed)
     ctrl = NominalController(
         track.centerline,
@@ -601,10 +600,15 @@ def lap_logs(
     spec = _as_car(car)
     logs = []
     for i, name in enumerate(tracks):
+        track = load_track(name)
+        s = track.centerline.sample(ds=2.0)
+        known = spec.known
+        prof = speed_profile(s, track.centerline.curvature(s), params=known, length=track.length)
         for j, scale in enumerate(scalings):
             while True:
                 try:
-                    logs.append(_lap_log(spec, seed + 10 * i + j, name, scale, max_time, st))
+                    lap = _lap_log(spec, seed + 10 * i + j, track, prof, scale, max_time, st)
+                    logs.append(lap)
                     break
                 except LostCar:
                     scale *= st.speed_backoff
