@@ -163,7 +163,7 @@ def identify_car(
     -------
     CarModel
         The identified model (:meth:`~racing_lib.experiments.sysid.IdentificationResult.car_model`:
-        the identified steering actuator and top speed, the default grip margin).
+        the identified steering actuator, top speed and grip margin).
 
     Raises
     ------

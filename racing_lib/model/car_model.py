@@ -189,7 +189,7 @@ class CarModel:
         )
         return (
             f"mu {self.params.mu:.3f}, {self.options.label()}, steering lag "
-            f"{self.steer_tau:.3f} s, grip margin {self.grip_margin:.0%}, edge margin {edge}"
+            f"{self.steer_tau:.3f} s, grip margin {100 * self.grip_margin:.2g}%, edge margin {edge}"
             f"{stable}"
         )
 

@@ -18,10 +18,12 @@ from typing import Any
 from racing_lib.config import fast_mode
 from racing_lib.errors import ModelError
 from racing_lib.experiments.sysid.lateral import (
+    GRIP_QUANTILE,
     _fit_braking_stability,
     _fit_lateral,
     _fit_steer_rate,
     _front_force_sin,
+    _grip_uncertainty,
 )
 from racing_lib.experiments.sysid.limits import collect_logs
 from racing_lib.experiments.sysid.longitudinal import (
@@ -151,6 +153,13 @@ class IdentificationResult:
     braking_growth : tuple of float
         The yaw's growth rate in the braking-stability run, measured and as the identified model
         predicts it over the same samples, 1/s (NaN without the run).
+    grip_uncertainty : float
+        How far the identified model's lateral acceleration may be from the car's: 99 % of its
+        predictions on the cornering samples (circles, steps and the laps it was not fitted on)
+        lie within this share of its peak lateral acceleration (-; NaN: not measured). It is the
+        grip margin of the plans (:meth:`car_model`).
+    grip_samples : int
+        The samples ``grip_uncertainty`` was measured on.
     """
 
     params: ModelParams
@@ -167,6 +176,8 @@ class IdentificationResult:
     braking_stable: bool | None = None
     stability_margin: float | None = None
     braking_growth: tuple[float, float] = (math.nan, math.nan)
+    grip_uncertainty: float = math.nan
+    grip_samples: int = 0
 
     @property
     def success(self) -> bool:
@@ -187,9 +198,22 @@ class IdentificationResult:
             if "held out" not in k and math.isfinite(f.r2) and f.r2 < R2_FLOOR
         ]
 
+    @property
+    def grip_margin(self) -> float:
+        """The share of friction the identified car's plans leave unused (-).
+
+        The identified :attr:`grip_uncertainty`: what the model cannot promise, the plan does not
+        ask for. Logs without cornering samples (never the case for an identification that fitted
+        the tyres) fall back to :data:`~racing_lib.model.GRIP_MARGIN`.
+        """
+        share = self.grip_uncertainty
+        # CarModel takes a margin below one half; a model that uncertain is not worth planning
+        # with, and its report's fit statistics say so.
+        return min(share, 0.45) if math.isfinite(share) else GRIP_MARGIN
+
     def car_model(
         self,
-        grip_margin: float = GRIP_MARGIN,
+        grip_margin: float | None = None,
         # Any: forwarded to CarModel, whose fields have different types.
         **fields: Any,
     ) -> CarModel:
@@ -197,9 +221,9 @@ class IdentificationResult:
 
         Parameters
         ----------
-        grip_margin : float
-            Share of the identified friction the planner leaves unused (default
-            :data:`~racing_lib.model.GRIP_MARGIN`).
+        grip_margin : float, optional
+            Share of the identified friction the planner leaves unused (default: the identified
+            :attr:`grip_margin`, from the model's lateral-acceleration error).
         **fields
             Other :class:`~racing_lib.model.CarModel` fields (options, edge margin); steering
             limits given here replace the identified ones.
@@ -211,7 +235,9 @@ class IdentificationResult:
         sheet's angle limit ``steer_max`` (rad) when it was given to :func:`identify`; the top
         speed ``v_top`` (m/s) where the full-throttle run found a governed one; laterally stable
         plans (``lateral_stability``) for a car that diverged in yaw when it braked with the
-        steering held. What was not identified keeps :class:`~racing_lib.model.CarModel`'s default.
+        steering held; a grip margin from the model's measured error. What was not identified
+        keeps :class:`~racing_lib.model.CarModel`'s default (the edge margin: how far the car
+        strays from its line is the controller's, measured on laps, not the model's).
         """
         actuator: dict[str, Any] = {"steer_tau": self.steer_tau}
         if math.isfinite(self.steer_rate_max):
@@ -222,7 +248,8 @@ class IdentificationResult:
             actuator["v_top"] = self.v_top
         if self.braking_stable is False and self.stability_margin is not None:
             actuator["lateral_stability"] = self.stability_margin
-        return CarModel(self.params, grip_margin=grip_margin, **(actuator | fields))
+        margin = self.grip_margin if grip_margin is None else grip_margin
+        return CarModel(self.params, grip_margin=margin, **(actuator | fields))
 
     def value(self, name: str) -> float:
         """A fitted value by its report name (e.g. ``"C_xw"``, ``"mu*D_f"``, ``"C_alpha_r"``)."""
@@ -273,7 +300,7 @@ class IdentificationResult:
         ffmt = "  ".join(f"{{:<{w}}}" for w in fw)
         out += [ffmt.format(*fhead), ffmt.format(*("-" * w for w in fw))]
         out += [ffmt.format(*x) for x in flines]
-        out += ["", self._verdict()]
+        out += ["", self._verdict(), self._grip_text()]
         out += ["", *(f"note: {n}" for n in self.notes)]
         out.append(f"{self.n_samples} control periods, identified in {self.elapsed:.1f} s.")
         return "\n".join(out)
@@ -289,6 +316,16 @@ class IdentificationResult:
         worst = ", ".join(f"{k} (R^2 {self.fits[k].r2:.3f})" for k in poor)
         return f"NO success: sub-models below R^2 {R2_FLOOR:g}: {worst}"
 
+    def _grip_text(self) -> str:
+        """The report's line on the grip margin and where it comes from."""
+        if not math.isfinite(self.grip_uncertainty):
+            return f"grip margin: {GRIP_MARGIN:.1%}, the default (no cornering samples to measure)"
+        return (
+            f"grip margin: {self.grip_margin:.1%}, the model's lateral-acceleration error that "
+            f"{GRIP_QUANTILE:.0%} of its predictions on {self.grip_samples} cornering samples "
+            "stay within, as a share of its peak"
+        )
+
     def to_dict(self) -> IdentificationRecord:
         """JSON-ready summary (parameters, steering lag, table, fit statistics)."""
         return {
@@ -298,6 +335,8 @@ class IdentificationResult:
             "fits": {k: dict(vars(v)) for k, v in self.fits.items()},
             "notes": list(self.notes),
             "n_samples": self.n_samples,
+            "grip_uncertainty": self.grip_uncertainty,
+            "grip_samples": self.grip_samples,
         }
 
 
@@ -347,6 +386,7 @@ def identify(
     fitted, tyres, fits, notes = _fit_all(kp, S, fit_steer_lag)
     fitted, limits = _fit_limits(fitted, S, tyres, fits, notes)
     rows = _report_rows(fitted, tyres, fits, truth, limits)
+    grip, n_grip = _grip_uncertainty(fitted, S, tyres["steer_tau"])
     sheet_steer = steer_max if steer_max is not None else getattr(kp, "steer_max", None)
     return IdentificationResult(
         params=fitted,
@@ -363,6 +403,8 @@ def identify(
         braking_stable=limits["braking stable"],
         stability_margin=limits["stability margin"],
         braking_growth=limits["braking growth"],
+        grip_uncertainty=grip,
+        grip_samples=n_grip,
     )
 
 

@@ -34,6 +34,18 @@ __all__ = ["rate_limited_steering"]
 #: The braking-stability run is judged while the speed is above this share of its start (-).
 _JUDGED_SPEED_SHARE = 0.8
 
+#: The share of cornering samples whose lateral-acceleration error the grip margin covers (-):
+#: the plan leaves unused the error that this share of the model's predictions stay within. A plan
+#: rides the limit for seconds on end, tens of control periods, so the margin must cover nearly
+#: every error the model makes, not a typical one: with 95 %, the van of CommonRoad's vehicle 3
+#: (a 1.3 % margin) lost 2 of 10 laps of Sepang, pushing its front tyres past their peak out of a
+#: corner; with 99 % (3 %) none. For the simulated car the 99 % error is 4.6-5.2 % of the peak,
+#: the 5 % that chapter 04 had chosen by hand.
+GRIP_QUANTILE = 0.99
+
+#: The manoeuvres whose samples measure the grip's uncertainty: every one that corners.
+_CORNERING = ("circles", "steps", "laps")
+
 
 def _axle_loads(kp: ModelParams, S: _Samples) -> tuple[np.ndarray, np.ndarray]:
     """Axle loads (N) with the longitudinal load transfer of the measured v_x_dot (Eq. 12)."""
@@ -315,6 +327,45 @@ def _balance_stats(
     return stats
 
 
+def _grip_uncertainty(fitted: ModelParams, S: _Samples, tau: float) -> tuple[float, int]:
+    """Step 6: how much of its peak the identified model may get the lateral acceleration wrong.
+
+    On every cornering sample (circles, steering steps and laps, in control and above
+    ``_V_MIN``), the identified tyres and steering lag predict the lateral acceleration
+    ``(F_yf cos(delta) + F_yr) / m``. The uncertainty is the :data:`GRIP_QUANTILE` quantile of
+    the error's magnitude, divided by the model's peak lateral acceleration (both axles at their
+    peak force, static loads): 99 % of the predictions lie within that share of the peak. The
+    laps were not fitted on (their slides and kerbs would corrupt the tyres), so they also test
+    the model where it was not fitted.
+
+    A plan that keeps this share of the friction unused (the identified grip margin, see
+    :meth:`IdentificationResult.car_model`) asks for no more than the car gave in 99 % of what
+    was seen. A model that explains the car worse, or a car that varies more from corner to
+    corner, gets a wider margin.
+
+    Returns
+    -------
+    share : float
+        The error quantile over the peak lateral acceleration (-), NaN without samples.
+    n : int
+        The samples it was measured on.
+    """
+    use = np.isin(S.kind, _CORNERING) & S.valid & (S.vx > _V_MIN)
+    if not np.any(use):
+        return math.nan, 0
+    Ssub = _subset(S, np.flatnonzero(use))
+    delta = S.steer_effective(tau)[use]
+    F_zf, F_zr = _axle_loads(fitted, Ssub)
+    a_f, a_r = _slip(fitted, Ssub, delta)
+    p = fitted
+    fyf = pacejka_lateral(a_f, F_zf, p.mu, p.B_f, p.C_f, p.D_f) * np.cos(delta)
+    fyr = pacejka_lateral(a_r, F_zr, p.mu, p.B_r, p.C_r, p.D_r)
+    error = np.abs((fyf + fyr) / p.m - Ssub.a_y)
+    static_f, static_r = p.static_loads()
+    peak = p.mu * (p.D_f * static_f + p.D_r * static_r) / p.m
+    return float(np.quantile(error, GRIP_QUANTILE) / peak), int(error.size)
+
+
 def _front_force_sin(kp: ModelParams, S: _Samples, tyres: dict[str, float]) -> np.ndarray:
     """``F_yf sin(delta)`` (N) with the identified tyres and steering lag: the steering's drag."""
     delta = S.steer_effective(tyres["steer_tau"])
@@ -460,8 +511,8 @@ def _fit_braking_stability(
     quantity the planner must respect: the plans' stability margin
     (:attr:`racing_lib.model.CarModel.lateral_stability`, 1/s). The model here is the one
     identified, around straight driving; the planner applies the margin to its own parameters
-    (the grip margin lowers the friction by 5 %) at the planned state, a small difference next
-    to the margin.
+    (the grip margin lowers the friction by a few per cent) at the planned state, a small
+    difference next to the margin.
 
     Returns
     -------
