@@ -307,9 +307,12 @@ def test_the_bmws_grip_margin_is_its_models_error_not_the_simulated_cars(bmw):
     # car. Its tyres are the planning model's own curve (Pacejka, no load sensitivity), but a
     # short log with a slide in it widens the tail (seeds 0-2: 2.8-3.5 % of the peak on the
     # full set, 8-16 % on the fast one).
+    from racing_lib.model import GRIP_MARGIN
+
     result, _, _ = bmw
     assert 0.01 < result.grip_uncertainty < 0.25, result.report()
     assert result.car_model().grip_margin == pytest.approx(result.grip_uncertainty)
+    assert result.car_model().grip_margin != GRIP_MARGIN
 
 
 @pytest.mark.slow

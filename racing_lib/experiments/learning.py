@@ -12,7 +12,8 @@ that loop for any car racing_lib can drive:
 
 What replaces the blanket margins in a learned iteration:
 
-* the **grip margin** (5 % of the friction everywhere) gives way to the correction's own
+* the **grip margin** (the same share of the friction everywhere: 5 % for the shipped model, the
+  measured error for an identified car) gives way to the correction's own
   uncertainty: the friction ellipse of the plan shrinks by ``uncertainty_margin`` posterior
   standard deviations of the learned accelerations (longitudinal and lateral, each on its axis),
   node by node (:attr:`racing_lib.planning.TimeOptimalSettings.uncertainty_margin`): close to

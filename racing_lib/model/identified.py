@@ -38,7 +38,7 @@ DATA_FILE = "identified_params.json"
 #: clean, and the driven lap was 0.8 s faster. Identification now measures the margin of any car
 #: it identifies (:attr:`racing_lib.experiments.sysid.IdentificationResult.grip_margin`, the 99th
 #: percentile of the model's lateral-acceleration error): 4.6-5.2 % for this car, so the shipped
-#: model, whose weights were tuned with this value, keeps it.
+#: model, with which the controller's weights were tuned, keeps this value.
 GRIP_MARGIN = 0.05
 
 
@@ -93,7 +93,8 @@ def identified_model() -> CarModel:
     The steering actuator is the one the MPC has assumed since chapter 05, the simulated car's
     data sheet (lag 0.08 s, 0.5 rad, 1.2 rad/s), not the fit's own lag
     (:func:`identified_steer_tau`, a few per cent longer): every shipped result was made with
-    it. A model of a car identified from its logs takes its identified lag
+    it. A model of a car identified from its logs takes its identified lag and a grip margin
+    measured from its model's error
     (:meth:`racing_lib.experiments.sysid.IdentificationResult.car_model`).
     """
     return CarModel(identified_params(), grip_margin=GRIP_MARGIN)

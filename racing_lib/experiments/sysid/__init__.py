@@ -50,13 +50,14 @@ Identified, in this order (each step uses the ones before it):
    (:attr:`IdentificationResult.stability_margin`,
    :attr:`racing_lib.model.CarModel.lateral_stability`).
 
-6. **The grip margin** (every cornering sample: circles, steps and the laps, which no fit used):
+6. **The grip margin** (circles, steps and the laps, which the tyre and lag fits left out):
    the identified model predicts each sample's lateral acceleration, and 99 % of its errors lie
    within a share of its peak lateral acceleration (:attr:`IdentificationResult.grip_uncertainty`).
    That share is the friction the plans leave unused (:attr:`IdentificationResult.grip_margin`):
    4.6-5.2 % for the simulated car, whose load-sensitive tyres the model does not have (the 5 %
    chosen by hand for its shipped model, :data:`racing_lib.model.GRIP_MARGIN`), and 1.7-4.6 %
-   for CommonRoad's, whose tyres are the model's own curve (full manoeuvre set, seeds 0-2). A
+   for CommonRoad's three cars, whose tyres are the model's own curve (full manoeuvre set,
+   seeds 0-2). A
    noisier car, or a model that fits worse, gets a wider one; so does a short log with a slide
    in it (the BMW's fast set: 8-16 %).
 
@@ -95,7 +96,8 @@ Data selection. Samples with the car sliding (``|v_y| > 0.1 v_x``) and the first
 (unknown actuator state) are dropped everywhere; the tyre, lag and inertia fits use only the
 designed manoeuvres (``circles``, ``steps``) with little longitudinal acceleration
 (``|v_x_dot| < 1.5 m/s^2``), because the simulated tyres share their friction between the
-longitudinal and lateral forces and laps contain wall contacts the logs cannot flag. The coast-down
+longitudinal and lateral forces and laps contain wall contacts the logs cannot flag (the grip
+margin's error is measured on the laps too: what the tyre fit did not see). The coast-down
 also tests for engine braking at pedal 0 (a deceleration term linear in speed); the simulated car
 has none, which the result's ``notes`` report.
 

@@ -33,6 +33,7 @@ from racing_lib.experiments.sysid.longitudinal import (
     _fit_pedal,
 )
 from racing_lib.experiments.sysid.manoeuvres import MANOEUVRES
+from racing_lib.experiments.sysid.report import _report_rows
 from racing_lib.experiments.sysid.samples import (
     _MIN_SAMPLES,
     Derivative,
@@ -40,13 +41,12 @@ from racing_lib.experiments.sysid.samples import (
     _Samples,
     _samples,
 )
-from racing_lib.io import atomic_write_json
-from racing_lib.model import GRIP_MARGIN, CarModel, ModelOptions, ModelParams, X
+from racing_lib.io import atomic_write_json, jsonable
+from racing_lib.model import GRIP_MARGIN, CarModel, ModelOptions, ModelParams
 from racing_lib.model.drive import Drive
 from racing_lib.model.identified import shipped_fit_path
 from racing_lib.vehicle import (
     VehicleParams,
-    axle_cornering_stiffness,
 )
 
 __all__ = ["TOLERANCES", "IdentificationRecord", "IdentificationResult", "identify", "main", "run"]
@@ -65,9 +65,15 @@ __all__ = ["TOLERANCES", "IdentificationRecord", "IdentificationResult", "identi
 #: 1.5 %.
 #: An identification as JSON (:meth:`IdentificationResult.to_dict`, the body of the shipped
 #: ``identified_params.json``): the model's parameters, the steering lag, the report's rows, the
-#: fit statistics and notes. Its values are numbers, strings, lists and nested objects, hence
-#: ``Any``.
+#: fit statistics, notes and the grip margin's measurement. Its values are numbers, strings,
+#: lists and nested objects, hence ``Any``.
 IdentificationRecord = dict[str, Any]
+
+#: The widest grip margin an identification gives its plans (-). A model whose lateral
+#: acceleration is off by more than this share of its peak in 1 % of the samples (a log with a
+#: long slide, or a model of the wrong shape) is not one to plan with at all: its report says so,
+#: and the plans keep this share, below the half of the friction that CarModel accepts.
+MAX_GRIP_MARGIN = 0.45
 
 #: The least R^2 a sub-model must reach for :attr:`IdentificationResult.success`: it explains at
 #: least half of the variance of what it predicts.
@@ -87,27 +93,6 @@ TOLERANCES: dict[str, float] = {
 # --------------------------------------------------------------------------------------------------
 # Result and entry points
 # --------------------------------------------------------------------------------------------------
-
-
-def _truth_params(
-    truth: VehicleParams | ModelParams | None,
-) -> tuple[ModelParams | None, float | None]:
-    if truth is None:
-        return None, None
-    tp = truth if isinstance(truth, ModelParams) else ModelParams.from_vehicle(truth)
-    tau = getattr(truth, "steer_tau", None)
-    return tp, (float(tau) if tau is not None else None)
-
-
-def _derived(p: ModelParams) -> dict[str, float]:
-    """Quantities that decide the car's behaviour more directly than B, C, D alone."""
-    F_zf, F_zr = p.static_loads()
-    return {
-        "mu*D_f": p.mu * p.D_f,
-        "mu*D_r": p.mu * p.D_r,
-        "C_alpha_f": axle_cornering_stiffness(F_zf, p.mu, p.B_f, p.C_f, p.D_f),
-        "C_alpha_r": axle_cornering_stiffness(F_zr, p.mu, p.B_r, p.C_r, p.D_r),
-    }
 
 
 @dataclass(frozen=True)
@@ -155,7 +140,7 @@ class IdentificationResult:
         predicts it over the same samples, 1/s (NaN without the run).
     grip_uncertainty : float
         How far the identified model's lateral acceleration may be from the car's: 99 % of its
-        predictions on the cornering samples (circles, steps and the laps it was not fitted on)
+        predictions on the samples of circles, steps and laps (which the tyre fit left out)
         lie within this share of its peak lateral acceleration (-; NaN: not measured). It is the
         grip margin of the plans (:meth:`car_model`).
     grip_samples : int
@@ -203,13 +188,12 @@ class IdentificationResult:
         """The share of friction the identified car's plans leave unused (-).
 
         The identified :attr:`grip_uncertainty`: what the model cannot promise, the plan does not
-        ask for. Logs without cornering samples (never the case for an identification that fitted
-        the tyres) fall back to :data:`~racing_lib.model.GRIP_MARGIN`.
+        ask for. It is capped at :data:`MAX_GRIP_MARGIN` (the report then says the model is too
+        uncertain to plan with); logs without samples to measure it (never the case for an
+        identification that fitted the tyres) fall back to :data:`~racing_lib.model.GRIP_MARGIN`.
         """
         share = self.grip_uncertainty
-        # CarModel takes a margin below one half; a model that uncertain is not worth planning
-        # with, and its report's fit statistics say so.
-        return min(share, 0.45) if math.isfinite(share) else GRIP_MARGIN
+        return min(share, MAX_GRIP_MARGIN) if math.isfinite(share) else GRIP_MARGIN
 
     def car_model(
         self,
@@ -318,16 +302,27 @@ class IdentificationResult:
 
     def _grip_text(self) -> str:
         """The report's line on the grip margin and where it comes from."""
-        if not math.isfinite(self.grip_uncertainty):
-            return f"grip margin: {GRIP_MARGIN:.1%}, the default (no cornering samples to measure)"
-        return (
-            f"grip margin: {self.grip_margin:.1%}, the model's lateral-acceleration error that "
-            f"{GRIP_QUANTILE:.0%} of its predictions on {self.grip_samples} cornering samples "
-            "stay within, as a share of its peak"
+        share = self.grip_uncertainty
+        if not math.isfinite(share):
+            return (
+                f"grip margin: {self.grip_margin:.1%}, the default ({self.grip_samples} samples "
+                "of circles, steps or laps to measure it)"
+            )
+        measured = (
+            f"the model's lateral-acceleration error that {GRIP_QUANTILE:.0%} of its "
+            f"predictions on {self.grip_samples} samples of circles, steps and laps stay within, "
+            "as a share of its peak"
         )
+        if share > MAX_GRIP_MARGIN:
+            return (
+                f"grip margin: capped at {self.grip_margin:.0%}; {measured}, is {share:.0%}: a "
+                "model this uncertain is not one to plan with. Look for slides or wall contacts "
+                "in the laps, or drive the full manoeuvre set (collect_logs(fast=False))"
+            )
+        return f"grip margin: {self.grip_margin:.1%}, {measured}"
 
     def to_dict(self) -> IdentificationRecord:
-        """JSON-ready summary (parameters, steering lag, table, fit statistics)."""
+        """JSON-ready summary (parameters, steering lag, table, fit statistics, grip error)."""
         return {
             "model_params": self.params.to_dict(),
             "steer_tau": self.steer_tau,
@@ -335,7 +330,7 @@ class IdentificationResult:
             "fits": {k: dict(vars(v)) for k, v in self.fits.items()},
             "notes": list(self.notes),
             "n_samples": self.n_samples,
-            "grip_uncertainty": self.grip_uncertainty,
+            "grip_uncertainty": jsonable(self.grip_uncertainty),
             "grip_samples": self.grip_samples,
         }
 
@@ -552,128 +547,6 @@ def _fit_limits(
         "top speed": full["v_top"],
         "top speed governed": full["governed"],
     }
-
-
-#: The report's rows: (parameter, unit, the manoeuvres it is fitted from).
-_REPORT_SPEC = (
-    ("C_xw", "kg/m", "coast-down"),
-    ("c_rr", "-", "coast-down"),
-    ("B_f", "1/rad", "circles+steps"),
-    ("C_f", "-", "circles+steps"),
-    ("D_f", "-", "circles+steps"),
-    ("B_r", "1/rad", "circles+steps"),
-    ("C_r", "-", "circles+steps"),
-    ("D_r", "-", "circles+steps"),
-    ("mu*D_f", "-", "circles+steps"),
-    ("mu*D_r", "-", "circles+steps"),
-    ("C_alpha_f", "N/rad", "circles+steps"),
-    ("C_alpha_r", "N/rad", "circles+steps"),
-    ("I_zz", "kg m^2", "steps"),
-    ("steer_tau", "s", "steps"),
-    ("pedal m_0", "m/s^2", "laps+steps"),
-    ("pedal m_vx", "1/s", "laps+steps"),
-    ("pedal m_thr", "m/s^2", "laps+steps"),
-    ("pedal m_brk", "m/s^2", "laps+steps"),
-    ("pedal p_thr", "W/kg", "laps+steps"),
-    ("pedal a_brk_max", "m/s^2", "braking"),
-    ("pedal brake_max", "-", "braking"),
-    ("steer_rate_max", "rad/s", "steering-rate"),
-    ("p_thr (full throttle)", "W/kg", "full-throttle"),
-    ("top speed", "m/s", "full-throttle"),
-)
-
-
-def _report_rows(
-    fitted: ModelParams,
-    tyres: dict[str, float],
-    fits: dict[str, Any],
-    truth: VehicleParams | ModelParams | None,
-    limits: dict[str, float],
-) -> list[dict[str, Any]]:
-    """One row per identified parameter: fitted and true value, error (%), fit quality.
-
-    Parameters
-    ----------
-    fitted : ModelParams
-        The identified set.
-    tyres : dict
-        The lateral fit's values (``steer_tau`` in s).
-    fits : dict
-        The quality of each fit, by name.
-    truth : VehicleParams, ModelParams or None
-        The true car (None: no "true" column).
-    limits : dict
-        The actuators' limits (:func:`_fit_limits`).
-    """
-    tp, tau_true = _truth_params(truth)
-    lat, yaw = fits["lateral balance (all data)"], fits["yaw balance (all data)"]
-    pedal = fitted.pedal
-    fd = _derived(fitted)
-    td = _derived(tp) if tp is not None else {}
-    pedal_vals = {
-        "pedal m_0": pedal.m_0,
-        "pedal m_vx": pedal.m_xi[X.VX],
-        "pedal m_thr": pedal.m_thr,
-        "pedal m_brk": pedal.m_brk,
-        "pedal p_thr": pedal.p_thr if pedal.p_thr is not None else float("nan"),
-        "pedal a_brk_max": pedal.a_brk_max if pedal.a_brk_max is not None else float("nan"),
-        "pedal brake_max": pedal.brake_max,
-    }
-    fit_of = {
-        "coast-down": f"RMS {fits['coast-down'].rms:.3g} m/s^2",
-        "circles+steps": f"RMS lat {lat.rms:.3g} m/s^2",
-        "steps": f"RMS yaw {yaw.rms:.3g} rad/s^2",
-        "laps+steps": f"held-out R^2 {fits['pedal map (held out)'].r2:.3f}",
-        "braking": "median of the full stops",
-        "steering-rate": _fit_text(fits, "steering rate"),
-        "full-throttle": _fit_text(fits, "full throttle (power)"),
-    }
-    power = _true_power(truth)
-    rows = []
-    for name, unit, man in _REPORT_SPEC:
-        if name in fd:
-            val, true = fd[name], td.get(name)
-        elif name == "steer_tau":
-            val, true = tyres["steer_tau"], tau_true
-        elif name in ("pedal p_thr", "p_thr (full throttle)"):
-            # The one pedal-map number with a true value: engine power at the wheels per kg.
-            val = pedal_vals[name] if name in pedal_vals else limits[name]
-            true = power
-        elif name in limits:
-            val = limits[name]
-            true = getattr(truth, name, None) if name == "steer_rate_max" else None
-        elif name in pedal_vals:
-            val, true = pedal_vals[name], None  # the powertrain is nonlinear: no true map
-        else:
-            val = getattr(fitted, name)
-            true = getattr(tp, name) if tp is not None else None
-        err = 100.0 * (val / true - 1.0) if true else None
-        rows.append(
-            {
-                "name": name,
-                "unit": unit,
-                "fitted": float(val),
-                "true": None if true is None else float(true),
-                "error_pct": err,
-                "fit": fit_of[man],
-                "manoeuvre": man,
-            }
-        )
-    return rows
-
-
-def _fit_text(fits: dict[str, Any], name: str) -> str:
-    """The report's fit column for fit ``name``: its RMS residual, or that it did not run."""
-    return f"RMS {fits[name].rms:.3g} {fits[name].unit}" if name in fits else "not identified"
-
-
-def _true_power(truth: VehicleParams | ModelParams | None) -> float | None:
-    """The true power at the wheels per kg, W/kg: the simulated car's engine or a map's p_thr."""
-    if hasattr(truth, "power_max"):
-        return truth.power_max * truth.driveline_efficiency / truth.m
-    if isinstance(truth, ModelParams):
-        return truth.pedal.p_thr
-    return None
 
 
 def run(seed: int = 0, fast: bool | None = None, out: str | None = None) -> IdentificationResult:

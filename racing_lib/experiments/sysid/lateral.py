@@ -39,12 +39,17 @@ _JUDGED_SPEED_SHARE = 0.8
 #: rides the limit for seconds on end, tens of control periods, so the margin must cover nearly
 #: every error the model makes, not a typical one: with 95 %, the van of CommonRoad's vehicle 3
 #: (a 1.3 % margin) lost 2 of 10 laps of Sepang, pushing its front tyres past their peak out of a
-#: corner; with 99 % (3 %) none. For the simulated car the 99 % error is 4.6-5.2 % of the peak,
+#: corner; with 99 % (2.7 %) none. For the simulated car the 99 % error is 4.6-5.2 % of the peak,
 #: the 5 % that chapter 04 had chosen by hand.
 GRIP_QUANTILE = 0.99
 
-#: The manoeuvres whose samples measure the grip's uncertainty: every one that corners.
-_CORNERING = ("circles", "steps", "laps")
+#: The manoeuvres whose samples measure the grip's uncertainty. Not the steering-rate run: its
+#: prediction needs the rate limit, which the steering lag alone does not model; nor the
+#: braking-stability run, whose growing yaw the stability margin answers.
+_GRIP_KINDS = ("circles", "steps", "laps")
+
+#: The Pacejka coefficients of both axles, in the order :func:`_lateral_error` takes them.
+_TYRE_COEFFS = ("B_f", "C_f", "D_f", "B_r", "C_r", "D_r")
 
 
 def _axle_loads(kp: ModelParams, S: _Samples) -> tuple[np.ndarray, np.ndarray]:
@@ -327,43 +332,75 @@ def _balance_stats(
     return stats
 
 
+def _lateral_error(
+    kp: ModelParams, S: _Samples, delta: np.ndarray, coeffs: tuple[float, ...]
+) -> np.ndarray:
+    """The model's lateral acceleration less the measured one, m/s^2, on every sample of ``S``.
+
+    Parameters
+    ----------
+    kp : ModelParams
+        Mass (kg), geometry (m) and ``mu`` of the car.
+    S : _Samples
+        The samples (their loads include the measured longitudinal load transfer).
+    delta : ndarray
+        The steering angle the tyres saw at each sample, rad.
+    coeffs : tuple of float
+        ``B_f, C_f, D_f, B_r, C_r, D_r`` (:data:`_TYRE_COEFFS`).
+
+    Returns
+    -------
+    ndarray
+        ``(F_yf cos(delta) + F_yr) / m - a_y``.
+    """
+    Bf, Cf, Df, Br, Cr, Dr = coeffs
+    F_zf, F_zr = _axle_loads(kp, S)
+    a_f, a_r = _slip(kp, S, delta)
+    fyf = pacejka_lateral(a_f, F_zf, kp.mu, Bf, Cf, Df) * np.cos(delta)
+    fyr = pacejka_lateral(a_r, F_zr, kp.mu, Br, Cr, Dr)
+    return (fyf + fyr) / kp.m - S.a_y
+
+
 def _grip_uncertainty(fitted: ModelParams, S: _Samples, tau: float) -> tuple[float, int]:
     """Step 6: how much of its peak the identified model may get the lateral acceleration wrong.
 
-    On every cornering sample (circles, steering steps and laps, in control and above
-    ``_V_MIN``), the identified tyres and steering lag predict the lateral acceleration
-    ``(F_yf cos(delta) + F_yr) / m``. The uncertainty is the :data:`GRIP_QUANTILE` quantile of
-    the error's magnitude, divided by the model's peak lateral acceleration (both axles at their
-    peak force, static loads): 99 % of the predictions lie within that share of the peak. The
-    laps were not fitted on (their slides and kerbs would corrupt the tyres), so they also test
-    the model where it was not fitted.
+    On the samples of the circles, the steering steps and the laps (:data:`_GRIP_KINDS`; in
+    control and above ``_V_MIN``), the identified tyres and steering lag predict the lateral
+    acceleration (:func:`_lateral_error`). The uncertainty is the :data:`GRIP_QUANTILE`
+    quantile of the error's magnitude, divided by the model's peak acceleration
+    (:meth:`~racing_lib.model.ModelParams.peak_acceleration`, the radius of the planner's
+    friction circle): 99 % of the predictions lie within that share of the peak. The tyre and
+    lag fits did not use the laps (their slides and kerbs would corrupt the tyres), so the laps
+    also test the model where it was not fitted.
 
     A plan that keeps this share of the friction unused (the identified grip margin, see
     :meth:`IdentificationResult.car_model`) asks for no more than the car gave in 99 % of what
     was seen. A model that explains the car worse, or a car that varies more from corner to
     corner, gets a wider margin.
 
+    Parameters
+    ----------
+    fitted : ModelParams
+        The identified model (tyres, mass in kg, geometry in m).
+    S : _Samples
+        All samples.
+    tau : float
+        The identified steering lag, s.
+
     Returns
     -------
     share : float
-        The error quantile over the peak lateral acceleration (-), NaN without samples.
+        The error quantile over the peak acceleration (-), NaN without samples.
     n : int
         The samples it was measured on.
     """
-    use = np.isin(S.kind, _CORNERING) & S.valid & (S.vx > _V_MIN)
+    use = np.isin(S.kind, _GRIP_KINDS) & S.valid & (S.vx > _V_MIN) & np.isfinite(S.a_y)
     if not np.any(use):
         return math.nan, 0
-    Ssub = _subset(S, np.flatnonzero(use))
     delta = S.steer_effective(tau)[use]
-    F_zf, F_zr = _axle_loads(fitted, Ssub)
-    a_f, a_r = _slip(fitted, Ssub, delta)
-    p = fitted
-    fyf = pacejka_lateral(a_f, F_zf, p.mu, p.B_f, p.C_f, p.D_f) * np.cos(delta)
-    fyr = pacejka_lateral(a_r, F_zr, p.mu, p.B_r, p.C_r, p.D_r)
-    error = np.abs((fyf + fyr) / p.m - Ssub.a_y)
-    static_f, static_r = p.static_loads()
-    peak = p.mu * (p.D_f * static_f + p.D_r * static_r) / p.m
-    return float(np.quantile(error, GRIP_QUANTILE) / peak), int(error.size)
+    coeffs = tuple(getattr(fitted, k) for k in _TYRE_COEFFS)
+    error = np.abs(_lateral_error(fitted, _subset(S, np.flatnonzero(use)), delta, coeffs))
+    return float(np.quantile(error, GRIP_QUANTILE) / fitted.peak_acceleration()), int(error.size)
 
 
 def _front_force_sin(kp: ModelParams, S: _Samples, tyres: dict[str, float]) -> np.ndarray:
@@ -447,18 +484,14 @@ def _fit_steer_rate(
     idx = np.concatenate([np.arange(a, b) for a, b in logs])
     use = idx[S.valid[idx] & (S.vx[idx] > _V_MIN)]
     sub = _subset(S, use)
-    F_zf, F_zr = _axle_loads(kp, sub)
     tau = tyres["steer_tau"]
+    coeffs = tuple(tyres[k] for k in _TYRE_COEFFS)
 
     def residual(log_rate: float) -> np.ndarray:
         delta = np.empty(S.vx.size)
         for a, b in logs:
             delta[a:b] = rate_limited_steering(S.steer[a:b], tau, math.exp(log_rate))
-        d = delta[use]
-        af, ar = _slip(kp, sub, d)
-        fyf = pacejka_lateral(af, F_zf, kp.mu, tyres["B_f"], tyres["C_f"], tyres["D_f"])
-        fyr = pacejka_lateral(ar, F_zr, kp.mu, tyres["B_r"], tyres["C_r"], tyres["D_r"])
-        return (fyf * np.cos(d) + fyr) / kp.m - sub.a_y
+        return _lateral_error(kp, sub, delta[use], coeffs)
 
     grid = np.log(np.geomspace(0.05, 20.0, 25))
     costs = [float(np.sum(residual(g) ** 2)) for g in grid]
@@ -511,8 +544,8 @@ def _fit_braking_stability(
     quantity the planner must respect: the plans' stability margin
     (:attr:`racing_lib.model.CarModel.lateral_stability`, 1/s). The model here is the one
     identified, around straight driving; the planner applies the margin to its own parameters
-    (the grip margin lowers the friction by a few per cent) at the planned state, a small
-    difference next to the margin.
+    (the grip margin lowers the friction, by a few per cent with the full manoeuvre set) at the
+    planned state, a small difference next to the margin.
 
     Returns
     -------
