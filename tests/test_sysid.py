@@ -412,7 +412,7 @@ def test_the_simulated_car_stays_stable_when_it_brakes_with_the_steering_held(lo
 def test_the_grip_margin_is_the_models_measured_lateral_error(result):
     # 99 % of the identified model's lateral accelerations on the circles, steps and laps lie
     # within the margin's share of its peak: about the 5 % chosen by hand for the shipped model
-    # (seeds 0-2: 4.4-4.9 % on the fast set, 4.6-5.2 % on the full one).
+    # (seeds 0-2: 4.5-4.9 % on the fast set, 4.6-5.2 % on the full one).
     assert 0.025 < result.grip_uncertainty < 0.08
     assert result.grip_samples > 1000
     assert result.car_model().grip_margin == pytest.approx(result.grip_uncertainty)
@@ -438,7 +438,7 @@ def test_a_grip_error_too_wide_to_plan_with_is_capped_and_said(result):
 def test_a_car_that_varies_more_gets_a_wider_grip_margin():
     # The same car without steering noise and with twice the default (the tyres then see a
     # steering the log does not hold; the pedal noise stays): the margin follows what the model
-    # cannot predict (seed 7: 4.7 % against 8.0 %; seeds 3 and 11: 3.7-4.1 % against 6.6-7.3 %).
+    # cannot predict (seed 7: 4.7 % against 8.0 %; seeds 3 and 11: 3.8-4.1 % against 6.7-7.4 %).
     margins = []
     for noise in (0.0, 0.004):
         car = VehicleParams(steer_noise_std=noise)

@@ -152,8 +152,8 @@ def identify_car(
         Seed of the manoeuvres' randomness.
     fast : bool, optional
         Fewer, shorter manoeuvres (default :func:`racing_lib.config.fast_mode`). Their shorter
-        logs give a wider grip margin to a car that slid in them (CommonRoad's BMW: 8-16 %
-        against 2.8-3.5 % with the full set).
+        logs give a wider grip margin to a car that slid in them (CommonRoad's BMW: 8.5-17 %
+        against 3.0-3.8 % with the full set).
     cache_dir : path, optional
         Folder of the cache files (default :func:`car_cache_dir`).
     refresh : bool

@@ -55,11 +55,11 @@ Identified, in this order (each step uses the ones before it):
    within a share of its peak lateral acceleration (:attr:`IdentificationResult.grip_uncertainty`).
    That share is the friction the plans leave unused (:attr:`IdentificationResult.grip_margin`):
    4.6-5.2 % for the simulated car, whose load-sensitive tyres the model does not have (the 5 %
-   chosen by hand for its shipped model, :data:`racing_lib.model.GRIP_MARGIN`), and 1.7-4.6 %
+   chosen by hand for its shipped model, :data:`racing_lib.model.GRIP_MARGIN`), and 1.8-5.1 %
    for CommonRoad's three cars, whose tyres are the model's own curve (full manoeuvre set,
    seeds 0-2). A
    noisier car, or a model that fits worse, gets a wider one; so does a short log with a slide
-   in it (the BMW's fast set: 8-16 %).
+   in it (the BMW's fast set: 8.5-17 %).
 
 A car nobody here wrote. The manoeuvres drive with a watchdog
 (:mod:`~racing_lib.experiments.sysid.watch`, :class:`ManoeuvreSettings`): a car that leaves the

@@ -39,7 +39,7 @@ _JUDGED_SPEED_SHARE = 0.8
 #: rides the limit for seconds on end, tens of control periods, so the margin must cover nearly
 #: every error the model makes, not a typical one: with 95 %, the van of CommonRoad's vehicle 3
 #: (a 1.3 % margin) lost 2 of 10 laps of Sepang, pushing its front tyres past their peak out of a
-#: corner; with 99 % (2.7 %) none. For the simulated car the 99 % error is 4.6-5.2 % of the peak,
+#: corner; with 99 % (3.0 %) none. For the simulated car the 99 % error is 4.6-5.2 % of the peak,
 #: the 5 % that chapter 04 had chosen by hand.
 GRIP_QUANTILE = 0.99
 
