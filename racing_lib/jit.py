@@ -128,6 +128,30 @@ def compiled_or_interpreted(
     return list(fns)
 
 
+def fix_inputs(fn: ca.Function, values: Sequence[ca.DM]) -> ca.Function:
+    """``fn`` with its last ``len(values)`` inputs fixed to ``values``, a Function of the others.
+
+    How code compiled with data as inputs (a learned correction's, one build per layout) is
+    called with one set of data: the result keeps ``fn``'s name and its other inputs, and
+    passes the values on at every call. Without values, ``fn`` itself.
+    """
+    import casadi as ca
+
+    if not values:
+        return fn
+    n_free = fn.n_in() - len(values)
+    inputs = [ca.MX.sym(fn.name_in(i), fn.sparsity_in(i)) for i in range(n_free)]
+    outputs = fn(*inputs, *values)
+    outputs = outputs if isinstance(outputs, list | tuple) else [outputs]
+    return ca.Function(
+        fn.name(),
+        inputs,
+        list(outputs),
+        [fn.name_in(i) for i in range(n_free)],
+        [fn.name_out(i) for i in range(fn.n_out())],
+    )
+
+
 def c_compiler() -> tuple[str | None, str]:
     """The C compiler builds are made with (``$CC``, else ``cc``) and ``""``, or None and why not.
 

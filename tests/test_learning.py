@@ -140,6 +140,35 @@ def test_a_correction_travels_with_its_model():
     assert _correction(2.0) != _correction()
 
 
+def test_every_correction_of_one_layout_shares_one_build():
+    # The GP data are an input of the compiled code, not constants in it: a second correction
+    # of the same layout reuses the first one's build and gives its own model's numbers.
+    from racing_lib.control.mpc.linearize import _substep_linearization, substep_linearization
+    from racing_lib.model.correction import correction_template
+    from racing_lib.model.equations import correction_as_input, discretize
+
+    model = identified_model()
+    first, second = _correction(), _correction(2.0)
+    assert first.layout == second.layout
+    build, data, values = correction_as_input(model.params.replace(correction=second))
+    assert build.correction is correction_template(second.layout)
+    assert np.array_equal(np.asarray(values[0]).ravel(), second.packed())
+    xi, u = np.array([30.0, 0.4, 0.2, 0.01, 0.5, 100.0]), np.array([0.05, -2.0])
+    for corr in (first, second):
+        params = model.params.replace(correction=corr)
+        lin = substep_linearization(params, model.options, 0.1, 2, True)
+        step = discretize(params, model.options, 0.05)  # the constants in the graph
+        x = ca.SX.sym("x", 6)
+        a_ref = ca.Function("a", [x], [ca.jacobian(step(step(x, u, 0.01, 0.0), u, 0.01, 0.0), x)])
+        a = np.asarray(lin(xi, u, 0.01, 0.0)[0])
+        assert np.allclose(a, np.asarray(a_ref(xi)), rtol=1e-12, atol=1e-12)
+    assert _substep_linearization.cache_info().currsize >= 1
+    builds = {_substep_linearization(build, model.options, 0.1, 2, True) for _ in range(2)}
+    assert len(builds) == 1
+    with pytest.raises(ModelError, match="symbols"):
+        build.correction.to_dict()
+
+
 def test_a_damaged_correction_is_refused():
     with pytest.raises(ModelError, match="racing-lib learn"):
         ModelParams.from_dict({"correction": {"oops": 1}})

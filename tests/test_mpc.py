@@ -699,16 +699,19 @@ def test_a_damaged_build_falls_back_to_the_interpreter(tmp_path, monkeypatch, ca
 
 @pytest.mark.skipif(os.name != "posix", reason="elsewhere no compiler is tried at all")
 def test_without_a_compiler_the_mpc_interprets_with_one_warning_that_says_why(monkeypatch, caplog):
-    from racing_lib.control.mpc.linearize import substep_linearization
+    from racing_lib.control.mpc.linearize import _substep_linearization, substep_linearization
     from racing_lib.model import ModelOptions, ModelParams
 
     monkeypatch.setenv("CC", "/no/such/dir/cc")
-    substep_linearization.cache_clear()  # built here, not taken from an earlier test
+    caches = (substep_linearization, _substep_linearization)  # the binding, and the build
+    for cache in caches:
+        cache.cache_clear()  # built here, not taken from an earlier test
     try:
         with caplog.at_level("WARNING"):
             lin = substep_linearization(ModelParams(), ModelOptions(), 0.1, 2, jit=True)
     finally:
-        substep_linearization.cache_clear()  # nor left for a later one
+        for cache in caches:
+            cache.cache_clear()  # nor left for a later one
     assert lin.class_name() == "SXFunction"
     warnings = [r.getMessage() for r in caplog.records if r.levelname == "WARNING"]
     assert len(warnings) == 1, warnings

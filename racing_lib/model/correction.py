@@ -17,6 +17,11 @@ MPC like every other parameter: the planner and the controller see the same corr
 Away from the data the mean returns to zero (the model as identified) and the posterior standard
 deviation grows: :meth:`ModelCorrection.std` says where the learned model is unsure.
 
+The GPs' data (a few thousand numbers) are not written into the compiled code of the NLP and the
+MPC as constants: that code takes them as an input (:class:`CorrectionTemplate`), so it is built
+once per layout (inducing inputs per GP) and every later correction of a learning run reuses the
+build. With the data as constants, each iteration spent about 50 s in the C compiler.
+
 The features say what the tyres and the powertrain are asked for: the slip angles (which the
 tyre forces depend on), the speed and the tyre acceleration (load transfer, combined slip,
 gears). They are frame-free, so the correction does not depend on where on which track the car
@@ -26,6 +31,7 @@ combinations off the recorded laps made a GP over them extrapolate wildly inside
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 from collections.abc import Mapping, Sequence
@@ -34,10 +40,17 @@ from typing import Any
 import numpy as np
 
 from racing_lib.errors import ModelError
-from racing_lib.model.gp import SparseGP
+from racing_lib.model.gp import (
+    CasadiGP,
+    SparseGP,
+    casadi_arrays,
+    casadi_mean,
+    casadi_std,
+    packed_size,
+)
 from racing_lib.model.states import X
 
-__all__ = ["CORRECTED", "FEATURES", "ModelCorrection"]
+__all__ = ["CORRECTED", "FEATURES", "CorrectionTemplate", "ModelCorrection", "correction_template"]
 
 #: The inputs of the correction, in order: the speed, the two slip angles and the tyre
 #: acceleration (m/s, rad, rad, m/s^2), as the model computes them (``model_terms``).
@@ -119,11 +132,32 @@ class ModelCorrection:
 
     def casadi(self, z: Any) -> list[Any]:
         """The three corrections as CasADi expressions of the feature column ``z`` (4 x 1)."""
-        return [0 if gp is None else gp.casadi_mean(z) for gp in self.gps]
+        return [0 if g is None else casadi_mean(z, g) for g in self._casadi_gps()]
 
     def casadi_std(self, z: Any) -> list[Any]:
         """The three posterior standard deviations as CasADi expressions of ``z`` (4 x 1)."""
-        return [0 if gp is None else gp.casadi_std(z) for gp in self.gps]
+        return [0 if g is None else casadi_std(z, g) for g in self._casadi_gps()]
+
+    def _casadi_gps(self) -> list[CasadiGP | None]:
+        import casadi as ca
+
+        return [
+            None if gp is None else casadi_arrays(ca.DM(gp.packed()), *gp.layout) for gp in self.gps
+        ]
+
+    # --- the data as an input of compiled code ----------------------------------------------------
+    @property
+    def layout(self) -> tuple[tuple[int, int] | None, ...]:
+        """``(M, d)`` of each GP (None where there is none): the shape of :meth:`packed`."""
+        return tuple(None if gp is None else gp.layout for gp in self.gps)
+
+    def packed(self) -> np.ndarray:
+        """Every GP's :meth:`~racing_lib.model.gp.SparseGP.packed` data, in one vector.
+
+        The value of the :class:`CorrectionTemplate` input of code built for this layout.
+        """
+        parts = [gp.packed() for gp in self.gps if gp is not None]
+        return np.concatenate(parts) if parts else np.zeros(0)
 
     # --- files ------------------------------------------------------------------------------------
     def _arrays(self) -> list[dict[str, Any] | None]:
@@ -153,3 +187,71 @@ class ModelCorrection:
             [None if g is None else SparseGP.from_dict(g) for g in gps],
             label=str(data.get("label", "")),
         )
+
+
+class CorrectionTemplate(ModelCorrection):
+    """A correction whose GPs' data are CasADi symbols: one build serves every correction alike.
+
+    A correction's GPs are a few thousand numbers; written into the generated C code as
+    constants, they made every learned correction a new build (the time-optimal NLP's
+    derivatives and the MPC's linearization: about 50 s of compiling per learning iteration).
+    Code built from a model whose correction is this template takes the data as an input
+    instead (:attr:`data`, laid out as :meth:`ModelCorrection.packed`), so it is compiled once per
+    :attr:`layout` and called with each correction's numbers.
+
+    Get one with :func:`correction_template` (cached: equal layouts share their symbols, and
+    with them the model's cached functions). Model functions built from it have :attr:`data` as
+    a free symbol, which the code that builds them turns into an input.
+    """
+
+    __slots__ = ("data", "template_layout")
+
+    def __init__(self, layout: tuple[tuple[int, int] | None, ...]) -> None:
+        import casadi as ca
+
+        layout = tuple(
+            None if shape is None else (int(shape[0]), int(shape[1])) for shape in layout
+        )
+        if len(layout) != len(CORRECTED):
+            raise ModelError(f"a correction's layout has {len(CORRECTED)} entries, got {layout}.")
+        size = sum(packed_size(*shape) for shape in layout if shape is not None)
+        object.__setattr__(self, "gps", (None,) * len(CORRECTED))
+        object.__setattr__(self, "label", f"template {layout}")
+        object.__setattr__(self, "template_layout", layout)
+        object.__setattr__(self, "data", ca.SX.sym("correction_data", size))
+        text = json.dumps(["template", layout])
+        object.__setattr__(self, "_digest", hashlib.sha256(text.encode()).hexdigest()[:16])
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        return (correction_template, (self.template_layout,))
+
+    @property
+    def layout(self) -> tuple[tuple[int, int] | None, ...]:
+        """The layout of the corrections this template stands for."""
+        return self.template_layout
+
+    def _casadi_gps(self) -> list[CasadiGP | None]:
+        out: list[CasadiGP | None] = []
+        start = 0
+        for shape in self.template_layout:
+            if shape is None:
+                out.append(None)
+                continue
+            size = packed_size(*shape)
+            out.append(casadi_arrays(self.data[start : start + size], *shape))
+            start += size
+        return out
+
+    def _no_data(self, *args: Any, **kwargs: Any) -> Any:
+        raise ModelError(
+            "a CorrectionTemplate holds symbols, not a learned correction: it cannot be "
+            "evaluated or saved; use the ModelCorrection it stands for."
+        )
+
+    mean = std = to_dict = packed = _no_data  # type: ignore[assignment]
+
+
+@functools.cache
+def correction_template(layout: tuple[tuple[int, int] | None, ...]) -> CorrectionTemplate:
+    """The :class:`CorrectionTemplate` of ``layout`` (one per layout and process)."""
+    return CorrectionTemplate(layout)

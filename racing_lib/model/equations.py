@@ -83,6 +83,7 @@ from typing import Any
 import casadi as ca
 
 from racing_lib.errors import ModelError
+from racing_lib.model.correction import CorrectionTemplate, correction_template
 from racing_lib.model.params import ModelOptions, ModelParams
 from racing_lib.model.states import NU, NX, Domain, Method, U, X, as_float
 
@@ -255,6 +256,31 @@ def _symbols() -> tuple[ca.SX, ca.SX, ca.SX, ca.SX]:
 INPUT_NAMES = ["xi", "u", "kappa", "theta"]
 
 
+def function_options(params: ModelParams) -> dict[str, Any]:
+    """Options of a CasADi Function built from ``params``.
+
+    A model whose correction is a :class:`~racing_lib.model.correction.CorrectionTemplate` has
+    the correction's data as a free symbol in its expressions; the Functions built along the way
+    must allow it, and the code that builds the final one makes it an input.
+    """
+    return {"allow_free": True} if isinstance(params.correction, CorrectionTemplate) else {}
+
+
+def correction_as_input(params: ModelParams) -> tuple[ModelParams, list[ca.SX], list[ca.DM]]:
+    """``params`` with its learned correction's data as a symbol, that symbol and its value.
+
+    Code built from the returned parameters, with the symbols appended to its inputs, is the
+    same for every correction of one layout, so :mod:`racing_lib.jit` compiles it once; call it
+    with the values (:func:`racing_lib.jit.fix_inputs`). Without a correction: ``params``
+    unchanged and two empty lists.
+    """
+    correction = params.correction
+    if correction is None or isinstance(correction, CorrectionTemplate):
+        return params, [], []
+    template = correction_template(correction.layout)
+    return params.replace(correction=template), [template.data], [ca.DM(correction.packed())]
+
+
 def check_args(params: object, options: object) -> None:
     """Refuse ``params`` that are not a ModelParams or ``options`` not a ModelOptions."""
     if not isinstance(params, ModelParams):
@@ -308,7 +334,9 @@ def time_dynamics(
     check_args(params, options)
     xi, u, kappa, theta = _symbols()
     xi_dot, _ = _equations(xi, u, kappa, theta, params, options)
-    return ca.Function("f_time", [xi, u, kappa, theta], [xi_dot], INPUT_NAMES, ["xi_dot"])
+    return ca.Function(
+        "f_time", [xi, u, kappa, theta], [xi_dot], INPUT_NAMES, ["xi_dot"], function_options(params)
+    )
 
 
 @_cached
@@ -324,7 +352,14 @@ def spatial_dynamics(
     xi_dot, terms = _equations(xi, u, kappa, theta, params, options)
     dxi_ds = xi_dot / terms["s_dot"]
     dxi_ds[X.S] = 1.0
-    return ca.Function("f_spatial", [xi, u, kappa, theta], [dxi_ds], INPUT_NAMES, ["dxi_ds"])
+    return ca.Function(
+        "f_spatial",
+        [xi, u, kappa, theta],
+        [dxi_ds],
+        INPUT_NAMES,
+        ["dxi_ds"],
+        function_options(params),
+    )
 
 
 @_cached
@@ -343,7 +378,12 @@ def model_terms(
     xi, u, kappa, theta = _symbols()
     _, terms = _equations(xi, u, kappa, theta, params, options)
     return ca.Function(
-        "model_terms", [xi, u, kappa, theta], list(terms.values()), INPUT_NAMES, list(terms.keys())
+        "model_terms",
+        [xi, u, kappa, theta],
+        list(terms.values()),
+        INPUT_NAMES,
+        list(terms.keys()),
+        function_options(params),
     )
 
 
@@ -373,6 +413,7 @@ def jacobians(
         [ca.jacobian(rhs, xi), ca.jacobian(rhs, u)],
         INPUT_NAMES,
         ["A_c", "B_c"],
+        function_options(params),
     )
 
 
@@ -405,6 +446,7 @@ def lateral_eigenvalue_test(
         [det, trace],
         [*INPUT_NAMES, "sigma"],
         ["det", "trace"],
+        function_options(params),
     )
 
 
@@ -460,7 +502,9 @@ def discretize(
     if step is None:
         inputs.append(h)
         names.append("h")
-    return ca.Function(f"F_{method}_{domain}", inputs, [xi_next], names, ["xi_next"])
+    return ca.Function(
+        f"F_{method}_{domain}", inputs, [xi_next], names, ["xi_next"], function_options(params)
+    )
 
 
 #: Alias of :func:`discretize`.
@@ -499,4 +543,5 @@ def discrete_linearization(
         [A, B, d],
         names,
         ["A_d", "B_d", "d_d"],
+        function_options(params),
     )

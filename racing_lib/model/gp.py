@@ -40,7 +40,16 @@ from scipy.optimize import minimize
 
 from racing_lib.errors import ModelError
 
-__all__ = ["SparseGP", "farthest_points", "fit_sparse_gp"]
+__all__ = [
+    "CasadiGP",
+    "SparseGP",
+    "casadi_arrays",
+    "casadi_mean",
+    "casadi_std",
+    "farthest_points",
+    "fit_sparse_gp",
+    "packed_size",
+]
 
 #: Added to kernel diagonals (relative to sf^2) so that Cholesky factorizations stay stable.
 JITTER = 1e-8
@@ -99,29 +108,40 @@ class SparseGP:
         var = self.sf**2 - np.einsum("ij,jk,ik->i", k, self.c, k)
         return np.sqrt(np.maximum(var, 0.0))
 
+    @property
+    def layout(self) -> tuple[int, int]:
+        """``(M, d)``: inducing inputs and input dimension (what compiled code depends on)."""
+        return int(self.z.shape[0]), int(self.z.shape[1])
+
+    def packed(self) -> np.ndarray:
+        """The arrays the CasADi formulas read, in one vector (:func:`casadi_arrays` unpacks it).
+
+        ``x_mean, x_scale, lengths, z / lengths, sf^2, (1e-3 sf)^2, w, c``, matrices column by
+        column: the data that a build with the GP as an input (:mod:`racing_lib.jit`) is
+        called with.
+        """
+        parts = [
+            self.x_mean,
+            self.x_scale,
+            self.lengths,
+            (self.z / self.lengths).ravel(order="F"),
+            [self.sf**2, (1e-3 * self.sf) ** 2],
+            self.w,
+            self.c.ravel(order="F"),
+        ]
+        return np.concatenate([np.asarray(part, dtype=float).ravel() for part in parts])
+
     def casadi_mean(self, x: Any) -> Any:
         """The posterior mean as a CasADi expression of the column ``x`` (d x 1, SX or MX)."""
         import casadi as ca
 
-        return ca.dot(self._casadi_k(x), ca.DM(self.w))
-
-    def _casadi_k(self, x: Any) -> Any:
-        """``k(x, Z)`` as a CasADi column (M x 1)."""
-        import casadi as ca
-
-        xl = ((x - ca.DM(self.x_mean)) / ca.DM(self.x_scale)) / ca.DM(self.lengths)
-        # exp(-0.5 |x - z|^2) for every inducing point, in length-scale units
-        diff = ca.repmat(xl.T, self.z.shape[0], 1) - ca.DM(self.z / self.lengths)
-        return self.sf**2 * ca.exp(-0.5 * ca.sum2(diff**2))
+        return casadi_mean(x, casadi_arrays(ca.DM(self.packed()), *self.layout))
 
     def casadi_std(self, x: Any) -> Any:
         """The posterior standard deviation as a CasADi expression of the column ``x``."""
         import casadi as ca
 
-        k = self._casadi_k(x)
-        var = self.sf**2 - ca.dot(k, ca.mtimes(ca.DM(self.c), k))
-        # a smooth floor keeps the square root differentiable where the GP is certain
-        return ca.sqrt(ca.fmax(var, 0.0) + (1e-3 * self.sf) ** 2)
+        return casadi_std(x, casadi_arrays(ca.DM(self.packed()), *self.layout))
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dictionary (floats exactly, as lists)."""
@@ -162,6 +182,74 @@ class SparseGP:
         if not shapes_ok:
             raise ModelError("a sparse GP's arrays do not fit together (inducing points, weights).")
         return gp
+
+
+def packed_size(m: int, d: int) -> int:
+    """Length of :meth:`SparseGP.packed` for ``m`` inducing inputs in ``d`` dimensions."""
+    return 3 * d + m * d + 2 + m + m * m
+
+
+@dataclass(frozen=True)
+class CasadiGP:
+    """A GP's arrays as CasADi matrices, numbers (``DM``) or symbols (``SX``): see ``packed``."""
+
+    x_mean: Any
+    x_scale: Any
+    lengths: Any
+    z_scaled: Any
+    sf2: Any
+    floor2: Any
+    w: Any
+    c: Any
+
+
+def casadi_arrays(data: Any, m: int, d: int) -> CasadiGP:
+    """Unpack a column laid out as :meth:`SparseGP.packed` (``DM`` or ``SX``) into its arrays."""
+    import casadi as ca
+
+    if data.numel() != packed_size(m, d):
+        raise ModelError(f"packed GP data of {data.numel()} entries; ({m}, {d}) takes "
+                         f"{packed_size(m, d)}.")  # fmt: skip
+    sizes = (d, d, d, m * d, 1, 1, m, m * m)
+    cuts = np.cumsum((0, *sizes))
+    part = [data[int(a) : int(b)] for a, b in zip(cuts[:-1], cuts[1:], strict=True)]
+    return CasadiGP(
+        x_mean=part[0],
+        x_scale=part[1],
+        lengths=part[2],
+        z_scaled=ca.reshape(part[3], m, d),
+        sf2=part[4],
+        floor2=part[5],
+        w=part[6],
+        c=ca.reshape(part[7], m, m),
+    )
+
+
+def _casadi_k(x: Any, g: CasadiGP) -> Any:
+    """``k(x, Z)`` as a CasADi column (M x 1)."""
+    import casadi as ca
+
+    xl = ((x - g.x_mean) / g.x_scale) / g.lengths
+    # exp(-0.5 |x - z|^2) for every inducing point, in length-scale units
+    diff = ca.repmat(xl.T, g.z_scaled.shape[0], 1) - g.z_scaled
+    return g.sf2 * ca.exp(-0.5 * ca.sum2(diff**2))
+
+
+def casadi_mean(x: Any, g: CasadiGP) -> Any:
+    """The posterior mean ``k_xZ w`` at the column ``x`` (d x 1), a CasADi expression."""
+    import casadi as ca
+
+    return ca.dot(_casadi_k(x, g), g.w)
+
+
+def casadi_std(x: Any, g: CasadiGP) -> Any:
+    """The posterior standard deviation at the column ``x``, a CasADi expression."""
+    import casadi as ca
+
+    k = _casadi_k(x, g)
+    var = g.sf2 - ca.dot(k, ca.mtimes(g.c, k))
+    # a smooth floor keeps the square root differentiable where the GP is certain
+    return ca.sqrt(ca.fmax(var, 0.0) + g.floor2)
 
 
 def farthest_points(x: np.ndarray, m: int) -> np.ndarray:

@@ -32,6 +32,7 @@ graph up to round-off.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
@@ -39,8 +40,10 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from racing_lib.errors import PlanningError
-from racing_lib.jit import compiled_or_interpreted
+from racing_lib.jit import compiled_or_interpreted, fix_inputs
 from racing_lib.model import NU, NX, U, X, lateral_eigenvalue_test, model_terms, spatial_dynamics
+from racing_lib.model.correction import CorrectionTemplate
+from racing_lib.model.equations import correction_as_input, function_options
 from racing_lib.model.params import ModelOptions, ModelParams
 from racing_lib.planning.demands import ellipse_axes
 from racing_lib.planning.time_optimal_settings import TimeOptimalSettings
@@ -236,7 +239,9 @@ def _node_function(
         path[-1:-1] = rows  # the speed row stays last
         lb = np.concatenate([lb[:-1], lb_rows, lb[-1:]])
         ub = np.concatenate([ub[:-1], ub_rows, ub[-1:]])
-    node = ca.Function("node", [w, d], [f, ca.vertcat(*path), 1.0 / terms["s_dot"]])
+    node = ca.Function(
+        "node", [w, d], [f, ca.vertcat(*path), 1.0 / terms["s_dot"]], function_options(params)
+    )
     return node, lb, ub
 
 
@@ -263,9 +268,31 @@ def interval_functions(
     -----
     With ``st.jit`` the first call for a parameter set compiles the derivative functions with
     the system's C compiler (about a second; the build is kept on disk, :mod:`racing_lib.jit`),
-    or logs one warning and keeps them interpreted when no compiler works.
+    or logs one warning and keeps them interpreted when no compiler works. A learned correction's
+    data are an input of that code, not part of it (:func:`racing_lib.model.equations.
+    correction_as_input`): every correction of one layout shares one build.
+    """
+    build, _, values = correction_as_input(params)
+    fns = _interval_functions(build, options, st)
+    bound = {
+        name: fix_inputs(getattr(fns, name), values)
+        for name in ("con", "con_jac", "obj", "obj_grad", "hess", "inv_sdot")
+    }
+    return dataclasses.replace(fns, **bound)
+
+
+@functools.lru_cache(maxsize=16)
+def _interval_functions(
+    params: ModelParams, options: ModelOptions, st: TimeOptimalSettings
+) -> IntervalFunctions:
+    """:func:`interval_functions` of parameters whose correction, if any, is a template.
+
+    A template's data symbol is the last input of every function (after the multipliers of
+    ``hess``).
     """
     import casadi as ca
+
+    data = [params.correction.data] if isinstance(params.correction, CorrectionTemplate) else []
 
     node, lb, ub = _node_function(params, options, st)
     wa, wb = ca.SX.sym("wa", _NW), ca.SX.sym("wb", _NW)
@@ -296,9 +323,9 @@ def interval_functions(
     sigma, lam = ca.SX.sym("sigma"), ca.SX.sym("lam", con.numel())
     hess = ca.hessian(sigma * obj + ca.dot(lam, con), v)[0]
     derivatives = [
-        ca.Function("interval_con_jac", args, [jac.nz[:]]),
-        ca.Function("interval_obj_grad", args, [ca.gradient(obj, v)]),
-        ca.Function("interval_hess", [*args, sigma, lam], [hess.nz[:]]),
+        ca.Function("interval_con_jac", [*args, *data], [jac.nz[:]]),
+        ca.Function("interval_obj_grad", [*args, *data], [ca.gradient(obj, v)]),
+        ca.Function("interval_hess", [*args, sigma, lam, *data], [hess.nz[:]]),
     ]
     if st.jit:
         # The derivatives are evaluated at every IPOPT iteration; compiled, they cost a fraction
@@ -311,12 +338,12 @@ def interval_functions(
         )
     con_jac, obj_grad, hess_fn = derivatives
     return IntervalFunctions(
-        con=ca.Function("interval_con", args, [con]),
+        con=ca.Function("interval_con", [*args, *data], [con]),
         con_jac=con_jac,
-        obj=ca.Function("interval_obj", args, [obj]),
+        obj=ca.Function("interval_obj", [*args, *data], [obj]),
         obj_grad=obj_grad,
         hess=hess_fn,
-        inv_sdot=ca.Function("inv_sdot", [wa, da], [q_a]),
+        inv_sdot=ca.Function("inv_sdot", [wa, da, *data], [q_a]),
         jac_sparsity=jac.sparsity(),
         hess_sparsity=hess.sparsity(),
         lb_path=lb,

@@ -12,7 +12,7 @@ import math
 import casadi as ca
 import numpy as np
 
-from racing_lib.jit import compiled_or_interpreted
+from racing_lib.jit import compiled_or_interpreted, fix_inputs
 from racing_lib.model import (
     NU,
     NX,
@@ -23,6 +23,8 @@ from racing_lib.model import (
     time_dynamics,
 )
 from racing_lib.model.actuator import steering_lag_coefficients
+from racing_lib.model.correction import CorrectionTemplate
+from racing_lib.model.equations import correction_as_input
 
 __all__ = [
     "augment_steering_lag",
@@ -46,8 +48,23 @@ def substep_linearization(
     0.1 s is unstable at low speed. With ``jit`` the Function is compiled to machine code by the
     system C compiler (about 1-4 s, once per parameter set: :mod:`racing_lib.jit` caches the
     build on disk by the hash of its code), which makes it about eight times faster than CasADi's
-    interpreter; without a compiler it falls back to the interpreter with a warning.
+    interpreter; without a compiler it falls back to the interpreter with a warning. A learned
+    correction's data are an input of the compiled code, so every correction of one layout
+    shares its build (:func:`racing_lib.model.equations.correction_as_input`).
     """
+    build, _, values = correction_as_input(params)
+    return fix_inputs(_substep_linearization(build, options, dt, substeps, jit), values)
+
+
+@functools.lru_cache(maxsize=16)
+def _substep_linearization(
+    params: ModelParams, options: ModelOptions, dt: float, substeps: int, jit: bool
+) -> ca.Function:
+    """:func:`substep_linearization` of parameters whose correction, if any, is a template.
+
+    A template's data symbol is the Function's last input.
+    """
+    data = [params.correction.data] if isinstance(params.correction, CorrectionTemplate) else []
     F = discretize(params, options, dt / substeps, "rk4", "time")
     xi, u = ca.SX.sym("xi", NX), ca.SX.sym("u", NU)
     kappa, theta = ca.SX.sym("kappa"), ca.SX.sym("theta")
@@ -57,7 +74,7 @@ def substep_linearization(
     A = ca.jacobian(x, xi)
     B = ca.jacobian(x, u)
     d = x - ca.mtimes(A, xi) - ca.mtimes(B, u)
-    fn = ca.Function("racing_lib_mpc_lin", [xi, u, kappa, theta], [A, B, d])
+    fn = ca.Function("racing_lib_mpc_lin", [xi, u, kappa, theta, *data], [A, B, d])
     if jit:
         (fn,) = compiled_or_interpreted([fn], "the MPC linearization", "MPCSettings(jit=False)")
     return fn
