@@ -40,7 +40,7 @@ from _script import argument_parser, run, tracks_to_measure
 
 from racing_lib.planning import DEFAULT_START, TimeOptimalSettings, plan
 from racing_lib.planning.time_optimal import clear_cache
-from racing_lib.planning.time_optimal_nlp import interval_functions
+from racing_lib.planning.time_optimal_nlp import clear_interval_caches
 
 #: The defaults before the structured NLP (both options are IPOPT's own defaults).
 PREVIOUS = TimeOptimalSettings(
@@ -57,7 +57,7 @@ WAYS = {
 def run_once(track, settings: TimeOptimalSettings, start: str) -> dict:
     """One plan from nothing cached: iterations, build and wall time (s), lap time (s)."""
     clear_cache()
-    interval_functions.cache_clear()
+    clear_interval_caches()
     t0 = time.perf_counter()
     res = plan(track, "time-optimal", start=start, time_optimal_settings=settings)
     wall = time.perf_counter() - t0

@@ -132,8 +132,20 @@ def fix_inputs(fn: ca.Function, values: Sequence[ca.DM]) -> ca.Function:
     """``fn`` with its last ``len(values)`` inputs fixed to ``values``, a Function of the others.
 
     How code compiled with data as inputs (a learned correction's, one build per layout) is
-    called with one set of data: the result keeps ``fn``'s name and its other inputs, and
-    passes the values on at every call. Without values, ``fn`` itself.
+    called with one set of data.
+
+    Parameters
+    ----------
+    fn : casadi.Function
+        Compiled or not; its last inputs take the values.
+    values : sequence of casadi.DM
+        The values of those inputs, in order.
+
+    Returns
+    -------
+    casadi.Function
+        An MX Function with ``fn``'s name, its other inputs and all its outputs, which passes the
+        values on at every call; ``fn`` itself when there are no values.
     """
     import casadi as ca
 

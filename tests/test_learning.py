@@ -15,7 +15,17 @@ import numpy as np
 import pytest
 
 from racing_lib.errors import ArgumentError, ModelError
-from racing_lib.experiments.learning import LearnSettings, known_best_lap, learn
+from racing_lib.experiments.learning import (
+    EDGE_SAFETY,
+    MIN_CAUTION,
+    IterationResult,
+    LearningRun,
+    LearnSettings,
+    _caution,
+    _iteration_model,
+    known_best_lap,
+    learn,
+)
 from racing_lib.experiments.pipeline import race
 from racing_lib.face.cli import main
 from racing_lib.model import (
@@ -150,23 +160,47 @@ def test_every_correction_of_one_layout_shares_one_build():
     model = identified_model()
     first, second = _correction(), _correction(2.0)
     assert first.layout == second.layout
-    build, data, values = correction_as_input(model.params.replace(correction=second))
+    build, _, values = correction_as_input(model.params.replace(correction=second))
     assert build.correction is correction_template(second.layout)
     assert np.array_equal(np.asarray(values[0]).ravel(), second.packed())
     xi, u = np.array([30.0, 0.4, 0.2, 0.01, 0.5, 100.0]), np.array([0.05, -2.0])
+    x, v = ca.SX.sym("x", 6), ca.SX.sym("v", 2)
+    _substep_linearization.cache_clear()
+    substep_linearization.cache_clear()
     for corr in (first, second):
         params = model.params.replace(correction=corr)
         lin = substep_linearization(params, model.options, 0.1, 2, True)
-        step = discretize(params, model.options, 0.05)  # the constants in the graph
-        x = ca.SX.sym("x", 6)
-        a_ref = ca.Function("a", [x], [ca.jacobian(step(step(x, u, 0.01, 0.0), u, 0.01, 0.0), x)])
-        a = np.asarray(lin(xi, u, 0.01, 0.0)[0])
-        assert np.allclose(a, np.asarray(a_ref(xi)), rtol=1e-12, atol=1e-12)
-    assert _substep_linearization.cache_info().currsize >= 1
-    builds = {_substep_linearization(build, model.options, 0.1, 2, True) for _ in range(2)}
-    assert len(builds) == 1
+        step = discretize(params, model.options, 0.05)  # the GP data as constants of the graph
+        end = step(step(x, v, 0.01, 0.0), v, 0.01, 0.0)
+        jac_x, jac_u = ca.jacobian(end, x), ca.jacobian(end, v)
+        ref = ca.Function("ref", [x, v], [jac_x, jac_u, end - jac_x @ x - jac_u @ v])
+        for got, want in zip(lin(xi, u, 0.01, 0.0), ref(xi, u), strict=True):
+            assert np.allclose(np.asarray(got), np.asarray(want), rtol=1e-11, atol=1e-11)
+    assert _substep_linearization.cache_info().misses == 1  # one build for both corrections
     with pytest.raises(ModelError, match="symbols"):
         build.correction.to_dict()
+
+
+def test_the_plans_derivatives_with_the_data_as_input_are_those_with_constants():
+    from racing_lib.planning.time_optimal import TimeOptimalSettings, _shape_settings
+    from racing_lib.planning.time_optimal_nlp import _interval_functions, interval_functions
+
+    model = identified_model()
+    params = model.params.replace(correction=_correction())
+    st = _shape_settings(TimeOptimalSettings(uncertainty_margin=2.0, jit=False))
+    bound = interval_functions(params, model.options, st)  # the template, then its data
+    constants = _interval_functions(params, model.options, st)  # the data in the graph
+    rng = np.random.default_rng(5)
+    args = [rng.uniform(0.5, 1.5, 7), rng.uniform(0.5, 1.5, 7), [0.02, 0.0, 100.0],
+            [0.02, 0.0, 103.0], 3.0]  # fmt: skip
+    for name in ("con", "con_jac", "obj_grad", "inv_sdot"):
+        fn_args = args[:1] + args[2:3] if name == "inv_sdot" else args
+        got = np.asarray(getattr(bound, name)(*fn_args))
+        want = np.asarray(getattr(constants, name)(*fn_args))
+        assert np.allclose(got, want, rtol=1e-9, atol=1e-10), name  # round-off only
+    lam = rng.normal(0.0, 1.0, bound.n_con)
+    got, want = bound.hess(*args, 0.7, lam), constants.hess(*args, 0.7, lam)
+    assert np.allclose(np.asarray(got), np.asarray(want), rtol=1e-9, atol=1e-10)
 
 
 def test_a_damaged_correction_is_refused():
@@ -284,3 +318,46 @@ def test_the_learn_command_refuses_bad_numbers(argv, capsys):
     assert main(["learn", *argv]) == 2
     err = capsys.readouterr().err
     assert err.startswith("error: --") and err.count("\n") == 1
+
+
+def test_an_unknown_car_is_refused_before_anything_is_driven(capsys):
+    assert main(["learn", "--car", "no-such-car", "--iterations", "0"]) == 2
+    err = capsys.readouterr().err
+    assert "unknown car 'no-such-car'" in err and "commonroad:vehicle2" in err
+
+
+def _iteration(i: int, *, clean: bool = True, caution: float = 1.0, ey_max: float = 0.1,
+               driven: float | None = 104.0) -> IterationResult:  # fmt: skip
+    return IterationResult(
+        iteration=i, planned_lap_s=103.0, driven_lap_s=driven, driven_lap_std_s=0.0,
+        gap_to_best_pct=None, walls=0 if clean else 2, offtrack_s=0.0, completed=4, laps=4,
+        ey_max_m=ey_max, prediction_error={}, grip_margin=0.0, edge_margin=0.4, caution=caution,
+        samples=0,
+    )  # fmt: skip
+
+
+def test_the_margins_follow_what_the_laps_showed():
+    # caution: 1 for the first learned iteration; halved after a clean one, down to MIN_CAUTION;
+    # doubled after one that touched a wall
+    assert _caution(None) == _caution(_iteration(0, clean=False)) == 1.0
+    assert _caution(_iteration(1, caution=1.0)) == 0.5
+    assert _caution(_iteration(2, caution=MIN_CAUTION)) == MIN_CAUTION
+    assert _caution(_iteration(2, clean=False, caution=0.5)) == 1.0
+    # the edge margin: the settings' for the first learned iteration and after one that was not
+    # clean; after a clean learned one, its largest tracking error and EDGE_SAFETY
+    base, corr, settings = identified_model(), _correction(), LearnSettings(edge_margin=0.4)
+    assert _iteration_model(base, None, settings, None) is base
+    first = _iteration_model(base, corr, settings, _iteration(0, ey_max=0.7))
+    assert first.edge_margin == 0.4 and first.grip_margin == 0.0
+    later = _iteration_model(base, corr, settings, _iteration(1, ey_max=0.12))
+    assert later.edge_margin == pytest.approx(0.12 + EDGE_SAFETY)
+    assert _iteration_model(base, corr, settings, _iteration(1, clean=False)).edge_margin == 0.4
+
+
+def test_a_run_reports_its_gain_over_the_identified_model():
+    run = LearningRun("expressway", None, [_iteration(0, driven=105.0), _iteration(1),
+                                           _iteration(2, driven=None)])  # fmt: skip
+    data = json.loads(json.dumps(run.to_dict()))
+    assert data["identified_lap_s"] == 105.0
+    gains = [it["gain_over_identified_pct"] for it in data["iterations"]]
+    assert gains[0] == 0.0 and gains[1] == pytest.approx(100 / 105) and gains[2] is None

@@ -15,7 +15,7 @@ from racing_lib.planning.time_optimal import TimeOptimalSettings, _shape_setting
 from racing_lib.planning.time_optimal_nlp import (
     NLP_SCALE,
     StructuredNLP,
-    _interval_functions,
+    clear_interval_caches,
     interval_functions,
 )
 
@@ -113,11 +113,9 @@ def test_the_compiled_derivatives_are_the_interpreted_ones_to_the_bit(name):
 @pytest.fixture
 def fresh_interval_cache():
     """No interval functions cached before or after the test (it builds them another way)."""
-    for cache in (interval_functions, _interval_functions):  # the build, and its binding
-        cache.cache_clear()
+    clear_interval_caches()
     yield
-    for cache in (interval_functions, _interval_functions):
-        cache.cache_clear()
+    clear_interval_caches()
 
 
 @pytest.mark.skipif(os.name != "posix", reason="elsewhere no compiler is tried at all")

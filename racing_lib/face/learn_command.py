@@ -17,15 +17,26 @@ def cmd_learn(args: argparse.Namespace) -> int:
     from racing_lib.experiments.learning import LearnSettings, learn
 
     settings = LearnSettings(iterations=args.iterations, seeds=args.seeds, seed=args.seed)
+    say = None if args.json else _say
+    model = plant = None
+    if args.car:
+        from racing_lib.experiments.own_car import identify_car, named_car
+
+        # Identified first (or read from its cache), as `lap --car` does; learning starts there.
+        named = named_car(args.car)
+        model = identify_car(named, report=say)
+        plant = named.car.make_plant
     if args.out:
         _say(f"learning on {args.track}: {args.iterations} iterations of {args.seeds} laps; "
              f"kept in {args.out}/ (rerun the same command to resume)")  # fmt: skip
     run = learn(
         args.track,
         settings,
+        model=model,
+        car=plant,
         out=args.out,
         progress=not args.json,
-        report=None if args.json else _say,
+        report=say,
     )
     if args.json:
         _emit_json(run.to_dict())
@@ -35,7 +46,9 @@ def cmd_learn(args: argparse.Namespace) -> int:
         print("no iteration drove clean laps")
         return 1
     gap = "" if best.gap_to_best_pct is None else f", {best.gap_to_best_pct:+.2f} % on the best lap"
-    print(f"best clean iteration: {best.iteration}, {best.driven_lap_s:.2f} s{gap}")
+    gain = run.gain_pct(best)
+    gain_text = "" if gain is None else f", {gain:.2f} % faster than the identified model"
+    print(f"best clean iteration: {best.iteration}, {best.driven_lap_s:.2f} s{gap}{gain_text}")
     return 0
 
 
@@ -50,6 +63,11 @@ def add_learn_parser(sub: Any, add_track: Callable[[argparse.ArgumentParser], No
     )
     p.add_argument("--seeds", type=int, default=4, help="laps per iteration (default 4)")
     p.add_argument("--seed", type=int, default=0, help="seed of the first lap (default 0)")
+    p.add_argument(
+        "--car",
+        help="learn on another car than the simulated one (a name that `racing-lib lap --car` "
+        "takes): identified first, or read from its kept model",
+    )
     p.add_argument("--out", help="folder that keeps every iteration (resumable)")
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
     p.set_defaults(func=cmd_learn)

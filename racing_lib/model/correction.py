@@ -225,6 +225,15 @@ class CorrectionTemplate(ModelCorrection):
     def __reduce__(self) -> tuple[Any, ...]:
         return (correction_template, (self.template_layout,))
 
+    # Equal only to itself: the cached model functions built from a template hold its symbol,
+    # so two templates of one layout (made directly, or by two threads at once) must not share
+    # them. The compiled code is still shared: it is cached by the text it is generated as.
+    def __eq__(self, other: object) -> bool:
+        return other is self
+
+    def __hash__(self) -> int:
+        return id(self)
+
     @property
     def layout(self) -> tuple[tuple[int, int] | None, ...]:
         """The layout of the corrections this template stands for."""

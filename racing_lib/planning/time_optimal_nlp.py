@@ -52,7 +52,14 @@ if TYPE_CHECKING:
     # casadi is imported where a problem is built: importing the planners stays cheap
     import casadi as ca
 
-__all__ = ["IntervalFunctions", "StructuredNLP", "interval_functions", "NLP_VARS", "NLP_SCALE"]
+__all__ = [
+    "IntervalFunctions",
+    "StructuredNLP",
+    "clear_interval_caches",
+    "interval_functions",
+    "NLP_VARS",
+    "NLP_SCALE",
+]
 
 # Variables per node, in this order, with their typical magnitudes (for scaling).
 NLP_VARS = ("VX", "VY", "R", "EPSI", "EY", "DELTA", "AX")
@@ -269,8 +276,9 @@ def interval_functions(
     With ``st.jit`` the first call for a parameter set compiles the derivative functions with
     the system's C compiler (about a second; the build is kept on disk, :mod:`racing_lib.jit`),
     or logs one warning and keeps them interpreted when no compiler works. A learned correction's
-    data are an input of that code, not part of it (:func:`racing_lib.model.equations.
-    correction_as_input`): every correction of one layout shares one build.
+    data are an input of that code, not part of it
+    (:func:`racing_lib.model.equations.correction_as_input`): every correction of one layout
+    shares one build (one per uncertainty margin, which is part of the settings).
     """
     build, _, values = correction_as_input(params)
     fns = _interval_functions(build, options, st)
@@ -279,6 +287,12 @@ def interval_functions(
         for name in ("con", "con_jac", "obj", "obj_grad", "hess", "inv_sdot")
     }
     return dataclasses.replace(fns, **bound)
+
+
+def clear_interval_caches() -> None:
+    """Forget every cached interval function: the next plan builds (or loads) them anew."""
+    interval_functions.cache_clear()
+    _interval_functions.cache_clear()
 
 
 @functools.lru_cache(maxsize=16)
