@@ -34,12 +34,14 @@ longer.
 from __future__ import annotations
 
 import argparse
+import math
 import statistics
 import time
 from pathlib import Path
 
 from _script import argument_parser, run
 
+from racing_lib.errors import RacingLibError
 from racing_lib.experiments.learning import LearnSettings, check_best, learn
 from racing_lib.geometry import Track
 from racing_lib.io import atomic_write_json
@@ -148,14 +150,22 @@ def main() -> int:
     settings = LearnSettings(
         iterations=args.iterations, seeds=args.seeds, seed=args.seed, inducing=args.inducing
     )
-    summaries = [_one_track(track, args, settings) for track in tracks]
+    summaries = []
+    for track in tracks:
+        try:
+            summaries.append(_one_track(track, args, settings))
+        except RacingLibError as exc:
+            # One circuit that fails (a plan that cannot be solved) does not stop the others.
+            print(f"{track.name}: stopped: {exc}", flush=True)
+            summaries.append({"best_possible_lap_s": math.nan, "iterations": [], "final": None})
     if len(summaries) > 1:
         print()
         print(f"{'track':<14} {'best s':>8} {'identified':>10} {'learned (final)':>16} "
               f"{'walls':>5} {'off s':>5}")  # fmt: skip
         for track, summary in zip(tracks, summaries, strict=True):
             best_lap = summary["best_possible_lap_s"]
-            first = summary["iterations"][0]["driven_lap_s"]
+            its = summary["iterations"]
+            first = its[0]["driven_lap_s"] if its else None
             final = summary["final"]
             done = [t for t in (final or {}).get("lap_times_s", []) if t is not None]
             learned = f"{_gap(statistics.fmean(done), best_lap):+.2f} %" if done else "-"

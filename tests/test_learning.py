@@ -197,10 +197,10 @@ def test_the_plans_derivatives_with_the_data_as_input_are_those_with_constants()
         fn_args = args[:1] + args[2:3] if name == "inv_sdot" else args
         got = np.asarray(getattr(bound, name)(*fn_args))
         want = np.asarray(getattr(constants, name)(*fn_args))
-        assert np.allclose(got, want, rtol=1e-9, atol=1e-10), name  # round-off only
+        assert np.allclose(got, want, rtol=1e-7, atol=1e-9), name  # round-off only
     lam = rng.normal(0.0, 1.0, bound.n_con)
     got, want = bound.hess(*args, 0.7, lam), constants.hess(*args, 0.7, lam)
-    assert np.allclose(np.asarray(got), np.asarray(want), rtol=1e-9, atol=1e-10)
+    assert np.allclose(np.asarray(got), np.asarray(want), rtol=1e-7, atol=1e-9)
 
 
 def test_a_damaged_correction_is_refused():
@@ -293,6 +293,12 @@ def test_the_loop_keeps_and_resumes_its_iterations(tmp_path):
     assert json.loads(json.dumps(again.to_dict()))["best_possible_lap_s"] == pytest.approx(
         102.95, abs=0.01
     )
+    # The main job is what it was: no correction in its model, and its plan, made after a learned
+    # one in this process, is iteration 0's to the last digit.
+    from racing_lib.planning import plan
+
+    assert identified_model().params.correction is None
+    assert plan(load_track("expressway")).lap_time == first.iterations[0].planned_lap_s
     # A damaged lap that the loop learns from (iteration 0's laps, driven with the blanket
     # margins, are clean) is refused when the run resumes.
     kept = json.loads((tmp_path / "iteration_00" / "summary.json").read_text())["clean_logs"]
@@ -361,3 +367,20 @@ def test_a_run_reports_its_gain_over_the_identified_model():
     assert data["identified_lap_s"] == 105.0
     gains = [it["gain_over_identified_pct"] for it in data["iterations"]]
     assert gains[0] == 0.0 and gains[1] == pytest.approx(100 / 105) and gains[2] is None
+
+
+def test_a_plan_that_fails_inside_the_loop_says_which_iteration_and_what_to_try(
+    monkeypatch, tmp_path
+):
+    import racing_lib.experiments.learning as learning
+    from racing_lib.errors import PlanningError
+
+    def no_plan(*args, **kwargs):
+        raise PlanningError("IPOPT returned 'Infeasible_Problem_Detected'")
+
+    monkeypatch.setattr(learning, "race", no_plan)
+    with pytest.raises(PlanningError) as info:
+        learn("expressway", LearnSettings(iterations=0, seeds=1), out=tmp_path)
+    message = str(info.value)
+    assert message.startswith("learning iteration 0 could not plan a lap")
+    assert str(tmp_path) in message and "Infeasible_Problem_Detected" in message

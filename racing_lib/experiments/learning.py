@@ -49,7 +49,7 @@ from zipfile import BadZipFile
 
 import numpy as np
 
-from racing_lib.errors import ArgumentError, ModelError
+from racing_lib.errors import ArgumentError, ModelError, PlanningError
 from racing_lib.experiments.lap import LapLog, LapResult, PlantFactory
 from racing_lib.experiments.pipeline import race
 from racing_lib.geometry import Track
@@ -503,15 +503,29 @@ def _run_iteration(
     t1 = time.perf_counter()
     plan_settings = TimeOptimalSettings(uncertainty_margin=settings.uncertainty_margin * caution)
     laps: list[LapResult] = []
-    result = race(
-        track,
-        model=model,
-        car=car,
-        trials=settings.seeds,
-        seed=settings.seed + 1000 * i,
-        plan_kwargs={"time_optimal_settings": plan_settings},
-        on_lap=laps.append,
-    )
+    try:
+        result = race(
+            track,
+            model=model,
+            car=car,
+            trials=settings.seeds,
+            seed=settings.seed + 1000 * i,
+            plan_kwargs={"time_optimal_settings": plan_settings},
+            on_lap=laps.append,
+        )
+    except PlanningError as exc:
+        kept = "" if out is None else f" The iterations before it are kept in {out}."
+        what = (
+            "the model as identified"
+            if correction is None
+            else f"its corrected model (uncertainty margin {plan_settings.uncertainty_margin:g} "
+            f"standard deviations, edge margin {model.edge_margin:.2f} m)"
+        )
+        raise PlanningError(
+            f"learning iteration {i} could not plan a lap with {what}.{kept} Keep the best "
+            "clean iteration so far, or learn again with fewer iterations or a smaller "
+            f"LearnSettings.uncertainty_margin. The planner said: {exc}"
+        ) from None
     t2 = time.perf_counter()
     plan_s = float(result.plan.solve_time) if result.plan is not None else 0.0
     metrics = [lap.metrics for lap in result.laps]
