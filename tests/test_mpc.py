@@ -788,3 +788,37 @@ def test_the_brake_is_not_cut_by_a_yaw_wobble_the_line_does_not_need():
     # A car that turns less than the line (understeering) keeps what it uses.
     xi_hat[:, X.R] = 0.1
     assert np.allclose(CoupledMPC.reserved_lateral_acceleration(xi_hat, xi_ref), 4.4)
+
+
+def test_with_a_learned_model_the_mpc_keeps_the_front_tyres_below_their_peak(circle_setup):
+    from racing_lib.model import ModelCorrection
+    from racing_lib.model.gp import fit_sparse_gp
+
+    plan, params = circle_setup
+    st = MPCSettings(horizon=8, jit=False)
+    assert CoupledMPC(plan, CarModel(params), settings=st).front_slip_limit is None
+    rng = np.random.default_rng(0)
+    z = np.column_stack(
+        [rng.uniform(10, 30, 60), rng.normal(0, 0.03, (60, 2)), rng.normal(0, 2, 60)]
+    )
+    gps = [fit_sparse_gp(z, 0.1 * z[:, 1 + k % 2], inducing=6) for k in range(3)]
+    learned = params.replace(correction=ModelCorrection(gps, label="test"))
+    mpc = CoupledMPC(plan, CarModel(learned), settings=st)
+    limit = mpc.front_slip_limit
+    assert 0.0 < limit < params.peak_slip_angle()[0]
+    xi_hat = np.zeros((8, 6))
+    xi_hat[:, X.VX], xi_hat[:, X.VY], xi_hat[:, X.R] = 20.0, -1.0, 0.25
+    heading = (-1.0 + params.l_f * 0.25) / 20.0  # (v_y + l_f r) / v_x: alpha_f = delta - heading
+    mpc._u_prev[:] = [heading, 0.0]  # the last command inside the bounds: nothing to widen
+    lower, upper = mpc.steering_within_slip(xi_hat)
+    np.testing.assert_allclose(lower, heading - limit)
+    np.testing.assert_allclose(upper, heading + limit)
+    # A last command far outside: each stage keeps what the steering rate limit can reach
+    mpc._u_prev[0] = heading + limit + 0.5
+    lower, upper = mpc.steering_within_slip(xi_hat)
+    rate = mpc.qp_shape.rate_limits[U.DELTA]
+    reach = mpc._u_prev[0] - rate * np.arange(1, 9)
+    np.testing.assert_allclose(
+        upper, np.minimum(np.maximum(heading + limit, reach), mpc.model.steer_max)
+    )
+    assert np.all(lower <= upper)

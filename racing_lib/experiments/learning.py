@@ -27,8 +27,10 @@ What replaces the blanket margins in a learned iteration:
 A lap that touched a wall or left the track is not learned from (its log holds the wall's forces,
 not the car's). The factor on the uncertainty margin (the iteration's *caution*) is set by how the
 learned iteration before went: doubled after one that was not clean, halved after a clean one,
-down to :data:`MIN_CAUTION`. On the expressway that halving and the measured edge margin took the
-closed loop from +1.50 % to +0.97 % of the best possible lap (``benchmarks/bench_learning.py``).
+down to :data:`MIN_CAUTION`. The MPC predicting with a learned model keeps the front tyres'
+slip angle within the planner's slip limit
+(:data:`racing_lib.control.mpc.coupled.LEARNED_SLIP_SHARE`): without that bound, laps on circuits
+with hairpins left the track.
 
 Every finished iteration is written to its own folder, with the run's track, settings and model
 in ``run.json``, so an interrupted run resumes where it stopped and loses no finished iteration;

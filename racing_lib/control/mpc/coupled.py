@@ -27,7 +27,11 @@ from racing_lib.interfaces import Command, Observation
 from racing_lib.model import NU, CarModel, U, X
 from racing_lib.planning.trajectory import Trajectory
 
-__all__ = ["CoupledMPC", "QPSolver"]
+__all__ = ["LEARNED_SLIP_SHARE", "CoupledMPC", "QPSolver"]
+
+#: With a learned model, the MPC keeps the front tyres' slip angle where they give at most this
+#: share of their peak force (the planner's ``TimeOptimalSettings.slip_force_share``).
+LEARNED_SLIP_SHARE = 0.95
 
 
 class QPSolver(Protocol):
@@ -61,6 +65,13 @@ class CoupledMPC(MPCBase):
         Horizon, weights, margins, fallbacks, QP settings.
     band : (band_min, band_max), optional
         Override of the e_y band per plan node (or scalars), m.
+
+    Attributes
+    ----------
+    front_slip_limit : float or None
+        With a model that carries a learned correction: the front slip angle the steering
+        command keeps to (rad; :meth:`steering_within_slip`, :data:`LEARNED_SLIP_SHARE` of the
+        peak force). None for a model as identified, whose MPC is the paper's.
 
     Examples
     --------
@@ -112,6 +123,15 @@ class CoupledMPC(MPCBase):
         self._qp_list = [self.qp]
         self._lam_used = self._lam if st.smooth_transition else np.zeros_like(self._lam)
         self._shift_buffer = []
+        # A learned correction may change how the model answers the steering (on circuits with
+        # hairpins, it cut the yaw response under hard braking fourfold), and an MPC predicting
+        # with it then steered the front tyres far past their peak and ran wide. The planner
+        # bounds the slip angles; with a learned model the MPC does too, on the front axle,
+        # which the steering acts on. The model as identified is left as the paper has it.
+        params = self.model.params
+        self.front_slip_limit = (
+            params.slip_angle_at(LEARNED_SLIP_SHARE)[0] if params.correction is not None else None
+        )
 
     def use_qp(self, solver: QPSolver) -> None:
         """Solve each period's QP with ``solver`` instead of the built-in OSQP fast path.
@@ -195,6 +215,35 @@ class CoupledMPC(MPCBase):
         expected = xi_hat[:n, X.VX] * xi_hat[:n, X.R]
         return np.minimum(np.abs(on_line), np.abs(expected))
 
+    def steering_within_slip(self, xi_hat: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Steering bounds that keep the front slip angle within :attr:`front_slip_limit`, rad.
+
+        ``alpha_f = delta - (v_y + l_f r) / v_x`` at the heuristic states of stages 0..N-1, so
+        ``delta`` stays within ``front_slip_limit`` of ``(v_y + l_f r) / v_x``, inside the
+        steering limits. Each stage's bounds are widened where needed to what the steering rate
+        limit can reach from the last command, so the QP always has a solution.
+
+        Parameters
+        ----------
+        xi_hat : ndarray (N, 6)
+            The heuristic states of stages 0..N-1.
+
+        Returns
+        -------
+        lower, upper : ndarray (N,)
+            Bounds of the steering command, rad.
+        """
+        limit = float(self.front_slip_limit or np.inf)
+        v_x = np.maximum(xi_hat[:, X.VX], 1.0)
+        heading = (xi_hat[:, X.VY] + self.model.params.l_f * xi_hat[:, X.R]) / v_x
+        lower, upper = heading - limit, heading + limit
+        rate = self._shape.rate_limits[U.DELTA] * np.arange(1, len(heading) + 1)
+        last = self._u_prev[U.DELTA]
+        lower = np.minimum(lower, last + rate)
+        upper = np.maximum(upper, last - rate)
+        steer_max = self.model.steer_max
+        return np.clip(lower, -steer_max, steer_max), np.clip(upper, -steer_max, steer_max)
+
     def step(self, obs: Observation) -> Command:
         """One control period: project, build the QP along the heuristic trajectory, solve."""
         st = self.settings
@@ -216,6 +265,8 @@ class CoupledMPC(MPCBase):
         u_min, u_max = np.empty((N, NU)), np.empty((N, NU))
         u_min[:, U.DELTA], u_min[:, U.AX] = -self.model.steer_max, a_min
         u_max[:, U.DELTA], u_max[:, U.AX] = self.model.steer_max, a_max
+        if self.front_slip_limit is not None:
+            u_min[:, U.DELTA], u_max[:, U.DELTA] = self.steering_within_slip(xi_hat[:N])
         # Linearize only at inputs the QP may choose: after a hard brake (or a fallback) the last
         # a_x can lie far outside this step's bounds, and the tyre slopes there made the
         # prediction unstable enough for OSQP to report the QP infeasible.
