@@ -160,7 +160,7 @@ def test_every_correction_of_one_layout_shares_one_build():
     model = identified_model()
     first, second = _correction(), _correction(2.0)
     assert first.layout == second.layout
-    build, _, values = correction_as_input(model.params.replace(correction=second))
+    build, values = correction_as_input(model.params.replace(correction=second))
     assert build.correction is correction_template(second.layout)
     assert np.array_equal(np.asarray(values[0]).ravel(), second.packed())
     xi, u = np.array([30.0, 0.4, 0.2, 0.01, 0.5, 100.0]), np.array([0.05, -2.0])

@@ -232,19 +232,24 @@ class LearningRun:
         return {
             "track": self.track,
             "best_possible_lap_s": self.best_possible_lap_s,
-            "identified_lap_s": self.iterations[0].driven_lap_s if self.iterations else None,
+            "identified_lap_s": self.identified_lap_s,
             "iterations": [
                 {**asdict(it), "gain_over_identified_pct": self.gain_pct(it)}
                 for it in self.iterations
             ],
         }
 
+    @property
+    def identified_lap_s(self) -> float | None:
+        """Iteration 0's driven lap (the model as identified), s; None before or without one."""
+        return self.iterations[0].driven_lap_s if self.iterations else None
+
     def gain_pct(self, it: IterationResult) -> float | None:
         """How much faster ``it`` drove than iteration 0 (the model as identified), %.
 
         None when either did not complete a lap.
         """
-        first = self.iterations[0].driven_lap_s if self.iterations else None
+        first = self.identified_lap_s
         if first is None or it.driven_lap_s is None:
             return None
         return 100.0 * (1.0 - it.driven_lap_s / first)

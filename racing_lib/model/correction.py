@@ -139,11 +139,7 @@ class ModelCorrection:
         return [0 if g is None else casadi_std(z, g) for g in self._casadi_gps()]
 
     def _casadi_gps(self) -> list[CasadiGP | None]:
-        import casadi as ca
-
-        return [
-            None if gp is None else casadi_arrays(ca.DM(gp.packed()), *gp.layout) for gp in self.gps
-        ]
+        return [None if gp is None else gp.casadi_data() for gp in self.gps]
 
     # --- the data as an input of compiled code ----------------------------------------------------
     @property

@@ -266,19 +266,25 @@ def function_options(params: ModelParams) -> dict[str, Any]:
     return {"allow_free": True} if isinstance(params.correction, CorrectionTemplate) else {}
 
 
-def correction_as_input(params: ModelParams) -> tuple[ModelParams, list[ca.SX], list[ca.DM]]:
-    """``params`` with its learned correction's data as a symbol, that symbol and its value.
+def correction_as_input(params: ModelParams) -> tuple[ModelParams, list[ca.DM]]:
+    """``params`` with its learned correction's data as a symbol, and the data's value.
 
-    Code built from the returned parameters, with the symbols appended to its inputs, is the
-    same for every correction of one layout, so :mod:`racing_lib.jit` compiles it once; call it
-    with the values (:func:`racing_lib.jit.fix_inputs`). Without a correction: ``params``
-    unchanged and two empty lists.
+    Code built from the returned parameters, with :func:`correction_inputs` appended to its
+    inputs, is the same for every correction of one layout, so :mod:`racing_lib.jit` compiles it
+    once; call it with the values (:func:`racing_lib.jit.fix_inputs`). Without a correction:
+    ``params`` unchanged and no values.
     """
     correction = params.correction
     if correction is None or isinstance(correction, CorrectionTemplate):
-        return params, [], []
+        return params, []
     template = correction_template(correction.layout)
-    return params.replace(correction=template), [template.data], [ca.DM(correction.packed())]
+    return params.replace(correction=template), [ca.DM(correction.packed())]
+
+
+def correction_inputs(params: ModelParams) -> list[ca.SX]:
+    """The extra inputs of code built from ``params``: its template's data symbol, or none."""
+    correction = params.correction
+    return [correction.data] if isinstance(correction, CorrectionTemplate) else []
 
 
 def check_args(params: object, options: object) -> None:

@@ -131,17 +131,19 @@ class SparseGP:
         ]
         return np.concatenate([np.asarray(part, dtype=float).ravel() for part in parts])
 
-    def casadi_mean(self, x: Any) -> Any:
-        """The posterior mean as a CasADi expression of the column ``x`` (d x 1, SX or MX)."""
+    def casadi_data(self) -> CasadiGP:
+        """The arrays of the CasADi formulas, as numbers (``DM``)."""
         import casadi as ca
 
-        return casadi_mean(x, casadi_arrays(ca.DM(self.packed()), *self.layout))
+        return casadi_arrays(ca.DM(self.packed()), *self.layout)
+
+    def casadi_mean(self, x: Any) -> Any:
+        """The posterior mean as a CasADi expression of the column ``x`` (d x 1, SX or MX)."""
+        return casadi_mean(x, self.casadi_data())
 
     def casadi_std(self, x: Any) -> Any:
         """The posterior standard deviation as a CasADi expression of the column ``x``."""
-        import casadi as ca
-
-        return casadi_std(x, casadi_arrays(ca.DM(self.packed()), *self.layout))
+        return casadi_std(x, self.casadi_data())
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dictionary (floats exactly, as lists)."""

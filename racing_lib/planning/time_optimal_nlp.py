@@ -42,8 +42,7 @@ import numpy as np
 from racing_lib.errors import PlanningError
 from racing_lib.jit import compiled_or_interpreted, fix_inputs
 from racing_lib.model import NU, NX, U, X, lateral_eigenvalue_test, model_terms, spatial_dynamics
-from racing_lib.model.correction import CorrectionTemplate
-from racing_lib.model.equations import correction_as_input, function_options
+from racing_lib.model.equations import correction_as_input, correction_inputs, function_options
 from racing_lib.model.params import ModelOptions, ModelParams
 from racing_lib.planning.demands import ellipse_axes
 from racing_lib.planning.time_optimal_settings import TimeOptimalSettings
@@ -280,7 +279,7 @@ def interval_functions(
     (:func:`racing_lib.model.equations.correction_as_input`): every correction of one layout
     shares one build (one per uncertainty margin, which is part of the settings).
     """
-    build, _, values = correction_as_input(params)
+    build, values = correction_as_input(params)
     fns = _interval_functions(build, options, st)
     bound = {
         name: fix_inputs(getattr(fns, name), values)
@@ -306,7 +305,7 @@ def _interval_functions(
     """
     import casadi as ca
 
-    data = [params.correction.data] if isinstance(params.correction, CorrectionTemplate) else []
+    data = correction_inputs(params)
 
     node, lb, ub = _node_function(params, options, st)
     wa, wb = ca.SX.sym("wa", _NW), ca.SX.sym("wb", _NW)

@@ -23,8 +23,7 @@ from racing_lib.model import (
     time_dynamics,
 )
 from racing_lib.model.actuator import steering_lag_coefficients
-from racing_lib.model.correction import CorrectionTemplate
-from racing_lib.model.equations import correction_as_input
+from racing_lib.model.equations import correction_as_input, correction_inputs
 
 __all__ = [
     "augment_steering_lag",
@@ -52,7 +51,7 @@ def substep_linearization(
     correction's data are an input of the compiled code, so every correction of one layout
     shares its build (:func:`racing_lib.model.equations.correction_as_input`).
     """
-    build, _, values = correction_as_input(params)
+    build, values = correction_as_input(params)
     return fix_inputs(_substep_linearization(build, options, dt, substeps, jit), values)
 
 
@@ -64,7 +63,7 @@ def _substep_linearization(
 
     A template's data symbol is the Function's last input.
     """
-    data = [params.correction.data] if isinstance(params.correction, CorrectionTemplate) else []
+    data = correction_inputs(params)
     F = discretize(params, options, dt / substeps, "rk4", "time")
     xi, u = ca.SX.sym("xi", NX), ca.SX.sym("u", NU)
     kappa, theta = ca.SX.sym("kappa"), ca.SX.sym("theta")
