@@ -17,7 +17,8 @@ What it hashes (SHA-256 of the raw float64 bytes, so one changed bit changes the
   coupled MPC on a plan handed over as ``reference=`` and on the same plan loaded from its file,
   and the nominal controller on the centerline plan (every logged array but the controller's
   step times, which are wall-clock);
-* an identification of the simulated car from fast-mode logs (the fitted parameters).
+* an identification of the simulated car from fast-mode logs (the model it yields: fitted
+  parameters, steering actuator and the measured grip margin).
 
 The hashes depend on the machine's BLAS kernel: compare runs made on the same machine.
 """
@@ -97,7 +98,8 @@ def main() -> int:
     from racing_lib.vehicle import VehicleParams
 
     fit = identify(collect_logs(seed=0, fast=True), truth=VehicleParams())
-    values = json.dumps(fit.params.to_dict(), sort_keys=True) + repr(fit.steer_tau)
+    # the whole model an identification yields: parameters, actuator and the measured margins
+    values = json.dumps(fit.car_model().to_dict(), sort_keys=True)
     out["identification"] = hashlib.sha256(values.encode()).hexdigest()[:16]
     json.dump(out, sys.stdout, indent=1)
     print()
