@@ -8,6 +8,7 @@ the loop for its files, its resumption and its refusals.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import casadi as ca
@@ -15,16 +16,20 @@ import numpy as np
 import pytest
 
 from racing_lib.errors import ArgumentError, ModelError
+from racing_lib.experiments.lap import LapLog
 from racing_lib.experiments.learning import (
     EDGE_SAFETY,
+    EXCURSION_WINDOW,
     MIN_CAUTION,
     IterationResult,
     LearningRun,
     LearnSettings,
     _caution,
     _iteration_model,
+    edge_excursions,
     known_best_lap,
     learn,
+    planning_track,
 )
 from racing_lib.experiments.pipeline import race
 from racing_lib.face.cli import main
@@ -219,6 +224,45 @@ def two_laps():
     return result.track, [lap.log for lap in result.laps]
 
 
+def _with_excursion(track, log, s_at: float, size: float):
+    """``log`` with its car on its line but for one excursion of ``size`` m near ``s_at``."""
+    ey = np.zeros_like(log.ey)
+    ey[int(np.argmin(np.abs(np.mod(log.s_track, track.length) - s_at)))] = size
+    return dataclasses.replace(log, ey=ey)
+
+
+def test_the_edge_margin_follows_the_laps_along_the_track(two_laps):
+    track, (lap, _) = two_laps
+    log = _with_excursion(track, lap, 1000.0, 1.2)
+    s, excursion = edge_excursions([log], track)
+    where = float(s[np.argmax(excursion > 0)] + EXCURSION_WINDOW)  # the middle of the stretch
+    assert abs(where - 1000.0) < 10.0
+    assert np.all(excursion[np.abs(s - where) < EXCURSION_WINDOW - 2.0] == 1.2)
+    assert np.all(excursion[np.abs(s - where) > EXCURSION_WINDOW + 2.0] == 0.0)
+    # the track the next plan is made on with a 0.4 m margin: narrower there on both sides by
+    # what the margin leaves of the excursion and the safety, unchanged elsewhere, on the same
+    # centerline
+    narrowed = planning_track(track, [log], 0.4)
+    knots = track.centerline.knots
+    for side in ("width_left", "width_right"):
+        cut = getattr(track, side)(knots) - getattr(narrowed, side)(knots)
+        assert cut.max() == pytest.approx(1.2 + EDGE_SAFETY - 0.4, abs=1e-6)
+        far = np.abs(knots - where) > EXCURSION_WINDOW + 5.0
+        np.testing.assert_allclose(cut[far], 0.0, atol=1e-9)
+    assert narrowed.centerline is track.centerline and narrowed.checksum() != track.checksum()
+    # laps that stayed within what the margin leaves: the track itself
+    assert planning_track(track, [_with_excursion(track, lap, 1000.0, 0.2)], 0.4) is track
+    # the lap is a loop: an excursion just after the line counts just before it
+    s, excursion = edge_excursions([_with_excursion(track, lap, 5.0, 0.5)], track)
+    assert excursion[-5] == 0.5
+    # an excursion wider than the track narrows it only so far that the car and the safety fit
+    wide = planning_track(track, [_with_excursion(track, lap, 1000.0, 50.0)], 0.4)
+    total = wide.width_left(knots) + wide.width_right(knots)
+    from racing_lib.planning.grid import DEFAULT_CAR_WIDTH
+
+    assert total.min() >= DEFAULT_CAR_WIDTH + 2 * 0.4
+
+
 def test_learning_improves_the_prediction_of_an_unseen_lap(two_laps):
     track, (seen, unseen) = two_laps
     model = identified_model()
@@ -299,6 +343,16 @@ def test_the_loop_keeps_and_resumes_its_iterations(tmp_path):
 
     assert identified_model().params.correction is None
     assert plan(load_track("expressway")).lap_time == first.iterations[0].planned_lap_s
+    # After a clean learned iteration, the next plan is made on the track narrowed by its laps'
+    # tracking errors, which a resumed run rebuilds from the kept laps.
+    assert one.clean
+    two = learn("expressway", LearnSettings(iterations=2, seeds=1, inducing=10), out=tmp_path)
+    track = load_track("expressway")
+    assert [t.checksum() for t in two.plan_tracks[:2]] == [track.checksum()] * 2
+    names = json.loads((tmp_path / "iteration_01" / "summary.json").read_text())["clean_logs"]
+    laps_1 = [LapLog.load(tmp_path / "iteration_01" / name) for name in names]
+    assert two.plan_tracks[2].checksum() == planning_track(track, laps_1, 0.4).checksum()
+    assert two.models[2].edge_margin == 0.4 <= two.iterations[2].edge_margin
     # A damaged lap that the loop learns from (iteration 0's laps, driven with the blanket
     # margins, are clean) is refused when the run resumes.
     kept = json.loads((tmp_path / "iteration_00" / "summary.json").read_text())["clean_logs"]
@@ -349,15 +403,12 @@ def test_the_margins_follow_what_the_laps_showed():
     assert _caution(_iteration(1, caution=1.0)) == 0.5
     assert _caution(_iteration(2, caution=MIN_CAUTION)) == MIN_CAUTION
     assert _caution(_iteration(2, clean=False, caution=0.5)) == 1.0
-    # the edge margin: the settings' for the first learned iteration and after one that was not
-    # clean; after a clean learned one, its largest tracking error and EDGE_SAFETY
+    # the edge margin of a learned model is the settings' (where laps strayed further, the track
+    # the plan is made on is narrower: planning_track)
     base, corr, settings = identified_model(), _correction(), LearnSettings(edge_margin=0.4)
-    assert _iteration_model(base, None, settings, None) is base
-    first = _iteration_model(base, corr, settings, _iteration(0, ey_max=0.7))
-    assert first.edge_margin == 0.4 and first.grip_margin == 0.0
-    later = _iteration_model(base, corr, settings, _iteration(1, ey_max=0.12))
-    assert later.edge_margin == pytest.approx(0.12 + EDGE_SAFETY)
-    assert _iteration_model(base, corr, settings, _iteration(1, clean=False)).edge_margin == 0.4
+    assert _iteration_model(base, None, settings) is base
+    learned = _iteration_model(base, corr, settings)
+    assert learned.edge_margin == 0.4 and learned.grip_margin == 0.0
 
 
 def test_a_run_reports_its_gain_over_the_identified_model():
@@ -378,7 +429,7 @@ def test_a_plan_that_fails_inside_the_loop_says_which_iteration_and_what_to_try(
     def no_plan(*args, **kwargs):
         raise PlanningError("IPOPT returned 'Infeasible_Problem_Detected'")
 
-    monkeypatch.setattr(learning, "race", no_plan)
+    monkeypatch.setattr(learning, "plan", no_plan)
     with pytest.raises(PlanningError) as info:
         learn("expressway", LearnSettings(iterations=0, seeds=1), out=tmp_path)
     message = str(info.value)

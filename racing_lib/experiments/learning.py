@@ -18,11 +18,15 @@ What replaces the blanket margins in a learned iteration:
   standard deviations of the learned accelerations (longitudinal and lateral, each on its axis),
   node by node (:attr:`racing_lib.planning.TimeOptimalSettings.uncertainty_margin`): close to
   the limit where the laps went, away from it where they did not;
-* the **edge margin** (0.8 m to a wall) becomes ``edge_margin`` (0.4 m by default) in the first
-  learned iteration, and after a clean learned iteration the largest lateral tracking error of
-  its laps plus :data:`EDGE_SAFETY` (the identified model's tracking, and that of an iteration
-  that went wrong, say nothing of how closely the corrected model tracks: after those the
-  setting holds).
+* the **edge margin** (0.8 m to a wall) becomes ``edge_margin`` (0.4 m by default), and after a
+  clean learned iteration it follows that iteration's laps along the track: where they strayed
+  from their line by more than the margin leaves, the next plan is made on a track narrowed to
+  keep their largest lateral tracking error within :data:`EXCURSION_WINDOW` of the point plus
+  :data:`EDGE_SAFETY` (:func:`planning_track`). The identified model's tracking, and that of an
+  iteration that went wrong, say nothing of how closely the corrected model tracks: after those
+  the setting alone holds. One excursion in one corner does not widen the margin on every metre
+  of the lap, as a margin of the laps' largest error did: on circuits that error came from one
+  corner, and the later iterations' plans slowed down everywhere.
 
 A lap that touched a wall or left the track is not learned from (its log holds the wall's forces,
 not the car's). The factor on the uncertainty margin (the iteration's *caution*) is set by how the
@@ -54,6 +58,12 @@ import numpy as np
 from racing_lib.errors import ArgumentError, ModelError, PlanningError
 from racing_lib.experiments.lap import LapLog, LapResult, PlantFactory
 from racing_lib.experiments.pipeline import race
+from racing_lib.experiments.track_margins import (
+    EDGE_SAFETY,
+    EXCURSION_WINDOW,
+    edge_excursions,
+    planning_track,
+)
 from racing_lib.geometry import Track
 from racing_lib.io import atomic_write_json, jsonable
 from racing_lib.model import CarModel, ModelCorrection, identified_model
@@ -63,23 +73,23 @@ from racing_lib.model.residuals import (
     one_step_errors,
     residual_samples,
 )
-from racing_lib.planning import TimeOptimalSettings
+from racing_lib.planning import TimeOptimalSettings, plan
 from racing_lib.tracks import load_track
 
 __all__ = [
     "EDGE_SAFETY",
+    "EXCURSION_WINDOW",
     "MIN_CAUTION",
     "check_best",
     "IterationResult",
     "LearnSettings",
     "LearningRun",
+    "edge_excursions",
     "known_best_lap",
     "learn",
+    "planning_track",
 ]
 
-#: Added to the largest lateral tracking error measured in an iteration to give the next
-#: iteration's edge margin, m.
-EDGE_SAFETY = 0.15
 #: Smallest factor on the uncertainty margin that clean iterations may bring the loop to.
 MIN_CAUTION = 0.5
 
@@ -166,7 +176,9 @@ class IterationResult:
     grip_margin : float
         The share of friction the plan left unused.
     edge_margin : float or None
-        The distance the plan kept from the track edge, m (None: the planner's default).
+        The largest distance the plan kept from the track's edges, m (None: the planner's
+        default); after a clean learned iteration, the margin varies along the track
+        (:func:`planning_track`).
     caution : float
         Factor on the settings' uncertainty margin: 1 in the first learned iteration, then
         halved after a clean iteration (down to :data:`MIN_CAUTION`) and doubled after one that
@@ -213,6 +225,9 @@ class LearningRun:
     iterations : list of IterationResult
     models : list of CarModel
         The model each iteration planned and predicted with, correction included.
+    plan_tracks : list of Track
+        The track each iteration planned on: the track itself, or the track narrowed by the
+        tracking errors of the iteration before (:func:`planning_track`).
     out : Path or None
         The folder of the run.
     """
@@ -221,6 +236,7 @@ class LearningRun:
     best_possible_lap_s: float | None
     iterations: list[IterationResult]
     models: list[CarModel] = field(default_factory=list, repr=False)
+    plan_tracks: list[Track] = field(default_factory=list, repr=False)
     out: Path | None = None
 
     def to_dict(self) -> dict[str, Any]:
@@ -375,21 +391,23 @@ def _caution(previous: IterationResult | None) -> float:
     return 2.0 * previous.caution
 
 
+def _follows_laps(previous: IterationResult | None) -> bool:
+    """Whether the edge margin follows the last iteration's laps (a clean learned one)."""
+    return previous is not None and previous.iteration > 0 and previous.clean
+
+
 def _iteration_model(
-    base: CarModel,
-    correction: ModelCorrection | None,
-    settings: LearnSettings,
-    previous: IterationResult | None,
+    base: CarModel, correction: ModelCorrection | None, settings: LearnSettings
 ) -> CarModel:
     """The model iteration i plans and predicts with."""
     if correction is None:
         return base
-    edge = settings.edge_margin
-    if previous is not None and previous.iteration > 0 and previous.clean:
-        # measured: how far the corrected model's laps strayed from their line, and a safety
-        edge = previous.ey_max_m + EDGE_SAFETY
+    # the least distance to an edge; where the laps strayed further, the track the plan is made
+    # on is narrower (planning_track)
     return base.replace(
-        params=base.params.replace(correction=correction), grip_margin=0.0, edge_margin=edge
+        params=base.params.replace(correction=correction),
+        grip_margin=0.0,
+        edge_margin=settings.edge_margin,
     )
 
 
@@ -440,8 +458,8 @@ def learn(
     best = known_best_lap(track_obj) if car is None else None
     say = report or (lambda line: None)
     run = LearningRun(track_obj.name, best, [], out=out_dir)
-    logs: list[LapLog] = []
     samples: list[ResidualSamples] = []
+    last_logs: list[LapLog] = []  # the clean laps of the iteration before
 
     bar = None
     if progress:
@@ -449,6 +467,10 @@ def learn(
 
         bar = tqdm(total=settings.iterations + 1, desc="learning", unit="iteration")
     for i in range(settings.iterations + 1):
+        previous = run.iterations[-1] if run.iterations else None
+        plan_track = track_obj
+        if _follows_laps(previous) and last_logs:
+            plan_track = planning_track(track_obj, last_logs, settings.edge_margin)
         done = None if out_dir is None else _load_done(out_dir, i)
         if done is not None:
             result, new_logs, model = done
@@ -459,14 +481,14 @@ def learn(
                     f"{_iteration_dir(out_dir, i)} is missing but later iterations are kept, "
                     "fitted on its laps; delete the later iterations' folders too."
                 )
-            previous = run.iterations[-1] if run.iterations else None
             result, new_logs, model = _run_iteration(
-                i, track_obj, base, car, settings, samples, previous, out_dir, best
+                i, track_obj, plan_track, base, car, settings, samples, previous, out_dir, best
             )
             say(_line(result))
         run.iterations.append(result)
         run.models.append(model)
-        logs += new_logs
+        run.plan_tracks.append(plan_track)
+        last_logs = new_logs
         samples += [residual_samples(log, track_obj, base) for log in new_logs]
         if bar is not None:
             bar.update(1)
@@ -478,6 +500,7 @@ def learn(
 def _run_iteration(
     i: int,
     track: Track,
+    plan_track: Track,
     base: CarModel,
     car: PlantFactory | None,
     settings: LearnSettings,
@@ -486,7 +509,7 @@ def _run_iteration(
     out: Path | None,
     best: float | None,
 ) -> tuple[IterationResult, list[LapLog], CarModel]:
-    """Fit (from iteration 1 on), plan and drive one iteration."""
+    """Fit (from iteration 1 on), plan (on ``plan_track``) and drive one iteration."""
     t0 = time.perf_counter()
     correction = None
     n_samples = 0
@@ -505,19 +528,20 @@ def _run_iteration(
             seed=settings.seed,
             label=f"learned from {n_samples} samples, iteration {i}",
         )
-    model = _iteration_model(base, correction, settings, previous)
+    model = _iteration_model(base, correction, settings)
     caution = _caution(previous)
     t1 = time.perf_counter()
     plan_settings = TimeOptimalSettings(uncertainty_margin=settings.uncertainty_margin * caution)
     laps: list[LapResult] = []
     try:
+        planned = plan(plan_track, "time-optimal", model, time_optimal_settings=plan_settings)
         result = race(
             track,
             model=model,
             car=car,
             trials=settings.seeds,
             seed=settings.seed + 1000 * i,
-            plan_kwargs={"time_optimal_settings": plan_settings},
+            reference=planned.trajectory,
             on_lap=laps.append,
         )
     except PlanningError as exc:
@@ -526,7 +550,7 @@ def _run_iteration(
             "the model as identified"
             if correction is None
             else f"its corrected model (uncertainty margin {plan_settings.uncertainty_margin:g} "
-            f"standard deviations, edge margin {model.edge_margin:.2f} m)"
+            f"standard deviations, edge margin {_largest_margin(model, track, plan_track):.2f} m)"
         )
         raise PlanningError(
             f"learning iteration {i} could not plan a lap with {what}.{kept} Keep the best "
@@ -534,7 +558,7 @@ def _run_iteration(
             f"LearnSettings.uncertainty_margin. The planner said: {exc}"
         ) from None
     t2 = time.perf_counter()
-    plan_s = float(result.plan.solve_time) if result.plan is not None else 0.0
+    plan_s = float(planned.solve_time)
     metrics = [lap.metrics for lap in result.laps]
     done = [m.lap_time_s for m in metrics if m.completed]
     mean = float(np.mean(done)) if done else None
@@ -557,7 +581,7 @@ def _run_iteration(
         ey_max_m=float(max(m.ey_max_m for m in metrics)),
         prediction_error=errors,
         grip_margin=model.grip_margin,
-        edge_margin=model.edge_margin,
+        edge_margin=_largest_margin(model, track, plan_track),
         caution=caution,
         samples=n_samples,
         wall_time_s={"fit": t1 - t0, "plan": plan_s, "laps": t2 - t1 - plan_s},
@@ -565,6 +589,15 @@ def _run_iteration(
     if out is not None:
         _save_done(out, iteration, laps, model)
     return iteration, [lap.log for lap in laps if _clean(lap)], model
+
+
+def _largest_margin(model: CarModel, track: Track, plan_track: Track) -> float | None:
+    """The largest distance a plan of ``model`` on ``plan_track`` keeps from the edges, m."""
+    if model.edge_margin is None or plan_track is track:
+        return model.edge_margin
+    knots = track.centerline.knots
+    cut = track.width_left(knots) - plan_track.width_left(knots)
+    return float(model.edge_margin + np.max(cut))
 
 
 def check_best(
@@ -578,9 +611,9 @@ def check_best(
 ) -> dict[str, Any]:
     """Drive the model of the fastest clean iteration on seeds no iteration used.
 
-    Re-plans with that model (with the run's ``settings`` and its iteration's caution) and
-    drives ``laps`` seeded laps from ``seed`` on; default: the first seed after every
-    iteration's (``settings.seed + 1000 * len(run.iterations)``).
+    Re-plans with that model (with the run's ``settings``, its iteration's caution, on the
+    track that iteration planned on) and drives ``laps`` seeded laps from ``seed`` on; default:
+    the first seed after every iteration's (``settings.seed + 1000 * len(run.iterations)``).
 
     Returns
     -------
@@ -599,13 +632,19 @@ def check_best(
     margin = settings.uncertainty_margin * best.caution
     if seed is None:
         seed = settings.seed + 1000 * len(run.iterations)
+    track_obj = load_track(track)
+    plan_track = (
+        run.plan_tracks[best.iteration] if best.iteration < len(run.plan_tracks) else track_obj
+    )
+    model = run.models[best.iteration]
+    planned = plan(
+        plan_track,
+        "time-optimal",
+        model,
+        time_optimal_settings=TimeOptimalSettings(uncertainty_margin=margin),
+    )
     result = race(
-        track,
-        model=run.models[best.iteration],
-        car=car,
-        trials=laps,
-        seed=seed,
-        plan_kwargs={"time_optimal_settings": TimeOptimalSettings(uncertainty_margin=margin)},
+        track_obj, model=model, car=car, trials=laps, seed=seed, reference=planned.trajectory
     )
     metrics = [lap.metrics for lap in result.laps]
     return {
