@@ -57,7 +57,7 @@ import numpy as np
 
 from racing_lib.errors import ArgumentError, ModelError, PlanningError
 from racing_lib.experiments.lap import LapLog, LapResult, PlantFactory
-from racing_lib.experiments.pipeline import race
+from racing_lib.experiments.pipeline import RaceResult, race
 from racing_lib.experiments.track_margins import (
     EDGE_SAFETY,
     EXCURSION_WINDOW,
@@ -73,7 +73,7 @@ from racing_lib.model.residuals import (
     one_step_errors,
     residual_samples,
 )
-from racing_lib.planning import TimeOptimalSettings, plan
+from racing_lib.planning import PlanResult, TimeOptimalSettings, plan
 from racing_lib.tracks import load_track
 
 __all__ = [
@@ -531,17 +531,17 @@ def _run_iteration(
     model = _iteration_model(base, correction, settings)
     caution = _caution(previous)
     t1 = time.perf_counter()
-    plan_settings = TimeOptimalSettings(uncertainty_margin=settings.uncertainty_margin * caution)
+    margin = settings.uncertainty_margin * caution
     laps: list[LapResult] = []
     try:
-        planned = plan(plan_track, "time-optimal", model, time_optimal_settings=plan_settings)
-        result = race(
+        planned, result = _plan_and_drive(
             track,
-            model=model,
+            plan_track,
+            model,
+            margin,
             car=car,
             trials=settings.seeds,
             seed=settings.seed + 1000 * i,
-            reference=planned.trajectory,
             on_lap=laps.append,
         )
     except PlanningError as exc:
@@ -549,7 +549,7 @@ def _run_iteration(
         what = (
             "the model as identified"
             if correction is None
-            else f"its corrected model (uncertainty margin {plan_settings.uncertainty_margin:g} "
+            else f"its corrected model (uncertainty margin {margin:g} "
             f"standard deviations, edge margin {_largest_margin(model, track, plan_track):.2f} m)"
         )
         raise PlanningError(
@@ -589,6 +589,35 @@ def _run_iteration(
     if out is not None:
         _save_done(out, iteration, laps, model)
     return iteration, [lap.log for lap in laps if _clean(lap)], model
+
+
+def _plan_and_drive(
+    track: Track,
+    plan_track: Track,
+    model: CarModel,
+    margin: float,
+    *,
+    car: PlantFactory | None,
+    trials: int,
+    seed: int,
+    on_lap: Callable[[LapResult], None] | None = None,
+) -> tuple[PlanResult, RaceResult]:
+    """Plan ``model``'s lap on ``plan_track`` and drive it ``trials`` times on ``track``.
+
+    ``margin``: the plan's uncertainty margin, posterior standard deviations.
+    """
+    settings = TimeOptimalSettings(uncertainty_margin=margin)
+    planned = plan(plan_track, "time-optimal", model, time_optimal_settings=settings)
+    result = race(
+        track,
+        model=model,
+        car=car,
+        trials=trials,
+        seed=seed,
+        reference=planned.trajectory,
+        on_lap=on_lap,
+    )
+    return planned, result
 
 
 def _largest_margin(model: CarModel, track: Track, plan_track: Track) -> float | None:
@@ -637,14 +666,8 @@ def check_best(
         run.plan_tracks[best.iteration] if best.iteration < len(run.plan_tracks) else track_obj
     )
     model = run.models[best.iteration]
-    planned = plan(
-        plan_track,
-        "time-optimal",
-        model,
-        time_optimal_settings=TimeOptimalSettings(uncertainty_margin=margin),
-    )
-    result = race(
-        track_obj, model=model, car=car, trials=laps, seed=seed, reference=planned.trajectory
+    _, result = _plan_and_drive(
+        track_obj, plan_track, model, margin, car=car, trials=laps, seed=seed
     )
     metrics = [lap.metrics for lap in result.laps]
     return {
