@@ -305,6 +305,23 @@ def test_broken_logs_are_refused(two_laps):
         fit_correction(ResidualSamples(few.features[:20], few.residuals[:20], few.s[:20]))
     with pytest.raises(ModelError, match="no residual samples"):
         ResidualSamples.concatenate([])
+    driving = np.flatnonzero(few.features[:, 3] > 0.0)[:60]
+    only_driving = ResidualSamples(few.features[driving], few.residuals[driving], few.s[driving])
+    with pytest.raises(ModelError, match="driving slower than 6 m/s"):
+        fit_correction(only_driving, below_speed=6.0)
+
+
+def test_the_correction_leaves_out_driving_near_the_top_speed(two_laps):
+    track, (seen, _) = two_laps
+    samples = residual_samples(seen, track, identified_model())
+    below = float(np.quantile(samples.features[:, 0], 0.8))
+    fast, braking = samples.features[:, 0] >= below, samples.features[:, 3] <= 0.0
+    assert np.any(fast & braking) and np.any(fast & ~braking)
+    keep = ~fast | braking
+    kept = ResidualSamples(samples.features[keep], samples.residuals[keep], samples.s[keep])
+    cut = fit_correction(samples, inducing=10, below_speed=below)
+    assert cut == fit_correction(kept, inducing=10)
+    assert cut != fit_correction(samples, inducing=10)
 
 
 def test_the_best_possible_lap_is_known_for_the_expressway():
@@ -314,7 +331,13 @@ def test_the_best_possible_lap_is_known_for_the_expressway():
 
 @pytest.mark.parametrize(
     ("kwargs", "match"),
-    [({"iterations": -1}, "iterations"), ({"seeds": 0}, "seeds"), ({"edge_margin": -0.1}, "edge")],
+    [
+        ({"iterations": -1}, "iterations"),
+        ({"seeds": 0}, "seeds"),
+        ({"edge_margin": -0.1}, "edge"),
+        ({"top_speed_band": 0.5}, "top_speed_band"),
+        ({"top_speed_band": -0.01}, "top_speed_band"),
+    ],
 )
 def test_bad_learning_settings_are_refused(kwargs, match):
     with pytest.raises(ArgumentError, match=match):
@@ -333,6 +356,20 @@ def test_the_loop_keeps_and_resumes_its_iterations(tmp_path):
     assert again.iterations[0] == first.iterations[0]
     one = again.iterations[1]
     assert one.samples > 500 and one.grip_margin == 0.0
+    # fitted on iteration 0's laps but where they drove near the model's top speed
+    names_0 = json.loads((tmp_path / "iteration_00" / "summary.json").read_text())["clean_logs"]
+    base = identified_model()
+    laps_0 = [
+        residual_samples(
+            LapLog.load(tmp_path / "iteration_00" / name), load_track("expressway"), base
+        )
+        for name in names_0
+    ]
+    seen = ResidualSamples.concatenate(laps_0).features
+    near_top = (seen[:, 0] >= (1 - LearnSettings().top_speed_band) * base.v_top) & (
+        seen[:, 3] > 0.0
+    )
+    assert near_top.sum() > 100 and one.samples == len(seen) - near_top.sum()
     assert one.prediction_error["learned"]["r"] < one.prediction_error["identified"]["r"]
     assert json.loads(json.dumps(again.to_dict()))["best_possible_lap_s"] == pytest.approx(
         102.95, abs=0.01

@@ -72,6 +72,7 @@ from racing_lib.model.residuals import (
     fit_correction,
     one_step_errors,
     residual_samples,
+    without_fast_driving,
 )
 from racing_lib.planning import PlanResult, TimeOptimalSettings, plan
 from racing_lib.tracks import load_track
@@ -118,6 +119,9 @@ class LearnSettings:
         Inducing inputs of each GP of the correction.
     min_length : float
         Shortest GP length scale, in standard deviations of each feature.
+    top_speed_band : float
+        Where the car drives faster than ``(1 - top_speed_band)`` times the model's top speed,
+        the laps are not learned from (:func:`racing_lib.model.residuals.without_fast_driving`).
     """
 
     iterations: int = 5
@@ -127,6 +131,7 @@ class LearnSettings:
     edge_margin: float = 0.4
     inducing: int = 40
     min_length: float = 1.0
+    top_speed_band: float = 0.02
 
     def __post_init__(self) -> None:
         checks = (
@@ -141,6 +146,9 @@ class LearnSettings:
             value = getattr(self, name)
             if not (isinstance(value, int | float) and math.isfinite(value) and value >= 0):
                 raise ArgumentError(f"LearnSettings.{name} must be a number >= 0, got {value!r}.")
+        band = self.top_speed_band
+        if not (isinstance(band, int | float) and 0.0 <= band < 0.5):
+            raise ArgumentError(f"LearnSettings.top_speed_band must be in [0, 0.5), got {band!r}.")
 
 
 @dataclass
@@ -520,13 +528,15 @@ def _run_iteration(
                 "Drive the identified model with larger margins first."
             )
         joined = ResidualSamples.concatenate(samples)
-        n_samples = len(joined)
+        below = base.v_top * (1.0 - settings.top_speed_band)
+        n_samples = len(without_fast_driving(joined, below))
         correction = fit_correction(
             joined,
             inducing=settings.inducing,
             min_length=settings.min_length,
             seed=settings.seed,
             label=f"learned from {n_samples} samples, iteration {i}",
+            below_speed=below,
         )
     model = _iteration_model(base, correction, settings)
     caution = _caution(previous)
