@@ -26,7 +26,7 @@ import stat
 import subprocess
 import sys
 import tempfile
-from collections.abc import Sequence
+from collections.abc import Collection, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -93,7 +93,11 @@ def compile_functions(
 
 
 def compiled_or_interpreted(
-    fns: Sequence[ca.Function], what: str, switch: str, name: str | None = None
+    fns: Sequence[ca.Function],
+    what: str,
+    switch: str,
+    name: str | None = None,
+    finite_differences: Collection[str] = (),
 ) -> list[ca.Function]:
     """``fns`` compiled together, or ``fns`` themselves with one warning when that fails.
 
@@ -108,6 +112,12 @@ def compiled_or_interpreted(
         ``"MPCSettings(jit=False)"``.
     name : str, optional
         The build's name in the cache folder (default: the first function's name).
+    finite_differences : collection of str
+        Names of the functions whose compiled form CasADi may differentiate by finite
+        differences. Compiled code has no derivatives of its own, and a graph that contains it
+        cannot be differentiated otherwise: give the names of functions that sit in a graph
+        CasADi differentiates as it is built (an NLP's constraints, whose derivatives the solver
+        is given ready-made), never of ones whose derivatives are used.
 
     Returns
     -------
@@ -115,7 +125,7 @@ def compiled_or_interpreted(
         Compiled where a C compiler works; otherwise the same functions, evaluated by CasADi's
         interpreter (the same numbers, several times slower).
     """
-    loaded, reason = _compile(fns, name or fns[0].name())
+    loaded, reason = _compile(fns, name or fns[0].name(), finite_differences)
     if loaded is not None:
         return loaded
     log.warning(
@@ -186,8 +196,13 @@ def c_compiler() -> tuple[str | None, str]:
     return compiler, ""
 
 
-def _compile(fns: Sequence[ca.Function], name: str) -> tuple[list[ca.Function] | None, str]:
-    """The compiled functions and ``""``, or None and the reason they could not be had."""
+def _compile(
+    fns: Sequence[ca.Function], name: str, finite_differences: Collection[str] = ()
+) -> tuple[list[ca.Function] | None, str]:
+    """The compiled functions and ``""``, or None and the reason they could not be had.
+
+    ``finite_differences``: see :func:`compiled_or_interpreted`.
+    """
     import casadi as ca
 
     compiler, reason = c_compiler()
@@ -209,7 +224,10 @@ def _compile(fns: Sequence[ca.Function], name: str) -> tuple[list[ca.Function] |
             if not library.exists():
                 _build(code, library, compiler)
             os.utime(library)  # most recently used: kept by the pruning below
-            loaded = [ca.external(fn.name(), str(library)) for fn in fns]
+            loaded = [
+                ca.external(fn.name(), str(library), {"enable_fd": fn.name() in finite_differences})
+                for fn in fns
+            ]
         except FileNotFoundError as exc:
             reason = str(exc)
             continue

@@ -26,12 +26,16 @@ N = 9  # small enough for dense comparisons, and the last interval wraps round t
 def pair(request):
     rng = np.random.default_rng(3)
     fns = interval_functions(ModelParams(), request.param, _shape_settings(TimeOptimalSettings()))
+    # the flat graph is differentiated by CasADi: its interval functions are never compiled
+    flat_fns = interval_functions(
+        ModelParams(), request.param, _shape_settings(TimeOptimalSettings(graph="sx"))
+    )
     kappa = 0.02 * np.sin(np.linspace(0.0, 2.0 * math.pi, N, endpoint=False))
     theta = 0.01 * np.cos(np.linspace(0.0, 2.0 * math.pi, N, endpoint=False))
     ds = rng.uniform(2.5, 3.5, N)
     s = np.concatenate([[0.0], np.cumsum(ds[:-1])])
     structured = StructuredNLP(fns, kappa, theta, s, ds, t_ref=5.0)
-    flat = StructuredNLP(fns, kappa, theta, s, ds, t_ref=5.0, graph="sx")
+    flat = StructuredNLP(flat_fns, kappa, theta, s, ds, t_ref=5.0, graph="sx")
     # A point away from every singularity: moving forward, moderate slip and steering.
     z = np.empty((len(NLP_SCALE), N))
     z[0] = rng.uniform(15.0, 40.0, N)
@@ -85,8 +89,8 @@ def test_interval_functions_are_built_once_per_parameter_set():
     )
 
 
-@pytest.mark.parametrize("name", ["con_jac", "obj_grad", "hess"])
-def test_the_compiled_derivatives_are_the_interpreted_ones_to_the_bit(name):
+@pytest.mark.parametrize("name", ["con", "con_jac", "obj_grad", "hess"])
+def test_the_compiled_functions_are_the_interpreted_ones_to_the_bit(name):
     st = TimeOptimalSettings()
     compiled = interval_functions(ModelParams(), ModelOptions(), _shape_settings(st))
     interpreted = interval_functions(
@@ -138,3 +142,18 @@ def test_other_graphs_compile_nothing():
     for graph in ("sx", "mx"):
         assert not _shape_settings(TimeOptimalSettings(graph=graph)).jit
     assert _shape_settings(TimeOptimalSettings()).jit
+
+
+def test_only_the_compiled_constraints_may_be_differentiated_by_casadi():
+    # nlpsol differentiates the graph of the constraints as it builds the solver; compiled code
+    # has no derivatives of its own, so the constraints allow finite differences, and nothing
+    # else does: a derivative that is used is always one of the compiled derivative functions.
+    if c_compiler()[0] is None:
+        pytest.skip("no C compiler on this machine: the planner interprets")
+    fns = interval_functions(ModelParams(), ModelOptions(), _shape_settings(TimeOptimalSettings()))
+    wa, wb = ca.MX.sym("wa", 7), ca.MX.sym("wb", 7)
+    args = [wa, wb, ca.DM([0.01, 0.0, 0.0]), ca.DM([0.01, 0.0, 3.0]), 3.0]
+    ca.gradient(ca.sum1(fns.con(*args)), wa)
+    lam = ca.DM.ones(fns.n_con)
+    with pytest.raises(RuntimeError, match="Derivatives cannot be calculated"):
+        ca.gradient(ca.sum1(fns.hess(*args, 1.0, lam)), wa)

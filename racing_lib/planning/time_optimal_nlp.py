@@ -14,12 +14,15 @@ small blocks:
   the global sparse Jacobian and upper-triangular Hessian with constant index maps
   (:class:`StructuredNLP`), which IPOPT receives as CasADi's ``jac_g``, ``grad_f`` and
   ``hess_lag``;
-* the three derivative functions are compiled to machine code (:mod:`racing_lib.jit`: one
-  compiler run per parameter set, options and settings, cached on disk). Evaluated by CasADi's
-  interpreter they took more than half of each solve, the Hessian most; compiled, the
-  evaluations take about a fifth of it and IPOPT's own linear algebra the rest, so a solve takes
-  about half the time, to the same plan bit for bit (``benchmarks/bench_plan_speed.py`` and
-  ``benchmarks/bench_nlp_iteration.py`` measure it).
+* the constraints and the three derivative functions are compiled to machine code
+  (:mod:`racing_lib.jit`: one compiler run per parameter set, options and settings, cached on
+  disk). Evaluated by CasADi's interpreter the derivatives took more than half of each solve,
+  the Hessian most; compiled, the evaluations take about a tenth of it and IPOPT's own linear
+  algebra the rest, so a solve takes about half the time, to the same plan bit for bit
+  (``benchmarks/bench_plan_speed.py`` and ``benchmarks/bench_nlp_iteration.py`` measure it).
+  With a learned correction (a GP's mean and standard deviation at every node) the evaluations
+  are most of a solve, and the constraints, interpreted, were half of them: compiled too, the
+  learning loop's plans on the expressway took 20-32 s instead of 34-52 s.
 
 Why not let CasADi differentiate the whole lap: with one flat SX graph of 1,464 nodes its symbolic
 Hessian took 6.3 s to build (expressway), more than the solve, and had to be rebuilt for every
@@ -335,23 +338,30 @@ def _interval_functions(
     jac = ca.jacobian(con, v)
     sigma, lam = ca.SX.sym("sigma"), ca.SX.sym("lam", con.numel())
     hess = ca.hessian(sigma * obj + ca.dot(lam, con), v)[0]
-    derivatives = [
+    functions = [
+        ca.Function("interval_con", [*args, *data], [con]),
         ca.Function("interval_con_jac", [*args, *data], [jac.nz[:]]),
         ca.Function("interval_obj_grad", [*args, *data], [ca.gradient(obj, v)]),
         ca.Function("interval_hess", [*args, sigma, lam, *data], [hess.nz[:]]),
     ]
-    if st.jit:
-        # The derivatives are evaluated at every IPOPT iteration; compiled, they cost a fraction
-        # of what CasADi's interpreter takes (the same numbers to the last bit).
-        derivatives = compiled_or_interpreted(
-            derivatives,
+    if st.jit and st.graph == "structured":
+        # The constraints and the derivatives are evaluated at every IPOPT iteration; compiled,
+        # they cost a fraction of what CasADi's interpreter takes (the same numbers to the last
+        # bit). Interpreted, the constraints of a plan with a learned correction took half its
+        # evaluation time. nlpsol differentiates the constraints' graph as it is built, though
+        # it is handed every derivative it calls: finite differences let it, and no solve
+        # evaluates them. The other graphs are differentiated by CasADi: their constraints stay
+        # symbolic.
+        functions = compiled_or_interpreted(
+            functions,
             "the time-optimal NLP's derivatives",
             "TimeOptimalSettings(jit=False)",
             name="racing_lib_nlp_interval",
+            finite_differences={"interval_con"},
         )
-    con_jac, obj_grad, hess_fn = derivatives
+    con_fn, con_jac, obj_grad, hess_fn = functions
     return IntervalFunctions(
-        con=ca.Function("interval_con", [*args, *data], [con]),
+        con=con_fn,
         con_jac=con_jac,
         obj=ca.Function("interval_obj", [*args, *data], [obj]),
         obj_grad=obj_grad,
