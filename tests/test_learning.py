@@ -30,7 +30,6 @@ from racing_lib.experiments.learning import (
     known_best_lap,
     learn,
     planning_track,
-    slip_share,
 )
 from racing_lib.experiments.pipeline import race
 from racing_lib.face.cli import main
@@ -50,7 +49,6 @@ from racing_lib.model.residuals import (
     one_step_errors,
     residual_samples,
 )
-from racing_lib.planning import TimeOptimalSettings
 from racing_lib.tracks import load_track
 
 
@@ -445,13 +443,9 @@ def test_the_margins_follow_what_the_laps_showed():
     # the edge margin of a learned model is the settings' (where laps strayed further, the track
     # the plan is made on is narrower: planning_track)
     base, corr, settings = identified_model(), _correction(), LearnSettings(edge_margin=0.4)
-    assert _iteration_model(base, None, settings, 1.0) is base
-    learned = _iteration_model(base, corr, settings, 1.0)
+    assert _iteration_model(base, None, settings) is base
+    learned = _iteration_model(base, corr, settings)
     assert learned.edge_margin == 0.4 and learned.grip_margin == 0.0
-    # the slip margin below the tyres' peak force: the planner's 5 % times the caution
-    assert learned.slip_share == pytest.approx(TimeOptimalSettings().slip_force_share)
-    assert _iteration_model(base, corr, settings, 0.5).slip_share == pytest.approx(0.975)
-    assert slip_share(2.0) == pytest.approx(0.9) and slip_share(64.0) == 0.5
 
 
 def test_a_run_reports_its_gain_over_the_identified_model():

@@ -28,16 +28,13 @@ What replaces the blanket margins in a learned iteration:
   of the lap, as a margin of the laps' largest error did: on circuits that error came from one
   corner, and the later iterations' plans slowed down everywhere.
 
-* the **slip margin** (the plans keep the tyres' slip angles where they give at most 95 % of their
-  peak force: the identified tyre curves are broader than the car's) shrinks with the caution
-  below: the learned plans may use ``1 - 5 % caution`` of the peak (:func:`slip_share`).
-
 A lap that touched a wall or left the track is not learned from (its log holds the wall's forces,
-not the car's). The factor on the uncertainty and slip margins (the iteration's *caution*) is set
-by how the learned iteration before went: doubled after one that was not clean, halved after a
-clean one, down to :data:`MIN_CAUTION`. The MPC predicting with a learned model keeps the front
-tyres' slip angle within the plan's slip margin (``CarModel.slip_share``): without that bound,
-laps on circuits with hairpins left the track.
+not the car's). The factor on the uncertainty margin (the iteration's *caution*) is set by how the
+learned iteration before went: doubled after one that was not clean, halved after a clean one,
+down to :data:`MIN_CAUTION`. The MPC predicting with a learned model keeps the front tyres'
+slip angle within the planner's slip limit
+(:data:`racing_lib.control.mpc.coupled.LEARNED_SLIP_SHARE`): without that bound, laps on circuits
+with hairpins left the track.
 
 Every finished iteration is written to its own folder, with the run's track, settings and model
 in ``run.json``, so an interrupted run resumes where it stopped and loses no finished iteration;
@@ -59,14 +56,12 @@ from zipfile import BadZipFile
 import numpy as np
 
 from racing_lib.errors import ArgumentError, ModelError, PlanningError
-from racing_lib.experiments.ablation.table import known_best_lap
 from racing_lib.experiments.lap import LapLog, LapResult, PlantFactory
 from racing_lib.experiments.pipeline import RaceResult, race
 from racing_lib.experiments.track_margins import (
     EDGE_SAFETY,
     EXCURSION_WINDOW,
     edge_excursions,
-    largest_margin,
     planning_track,
 )
 from racing_lib.geometry import Track
@@ -94,7 +89,6 @@ __all__ = [
     "known_best_lap",
     "learn",
     "planning_track",
-    "slip_share",
 ]
 
 #: Smallest factor on the uncertainty margin that clean iterations may bring the loop to.
@@ -290,6 +284,20 @@ class LearningRun:
         return min(clean, key=lambda it: it.driven_lap_s or math.inf) if clean else None
 
 
+def known_best_lap(track: Track) -> float | None:
+    """The best possible lap of the simulated car on ``track``, s, where it is known.
+
+    From the shipped ablation table's ``best-lap`` row (an NLP on the car's own equations,
+    :mod:`racing_lib.planning.best_lap`), when the track is the one it was planned on.
+    """
+    from racing_lib.experiments.ablation.table import shipped_table
+
+    for row in shipped_table():
+        if row.get("name") == "best-lap" and row.get("track_checksum") == track.checksum():
+            return float(row["planned_lap_time_s"])
+    return None
+
+
 def _run_identity(
     track: Track, settings: LearnSettings, base: CarModel, car: PlantFactory | None
 ) -> dict[str, Any]:
@@ -396,21 +404,8 @@ def _follows_laps(previous: IterationResult | None) -> bool:
     return previous is not None and previous.iteration > 0 and previous.clean
 
 
-def slip_share(caution: float) -> float:
-    """The share of the tyres' peak force a learned iteration's slip angles are kept to.
-
-    The planner's margin below the peak (5 %, ``TimeOptimalSettings.slip_force_share``) stands
-    in for what the model does not know of the tyres near it. Learned iterations scale it by
-    their caution, as they do the uncertainty margin: 5 % in the first, 2.5 % after a clean one,
-    10 % after one that was not clean (at most 50 %). On the expressway, 2.5 % instead of 5 %
-    made the second iteration's plan 0.34 s faster (103.26 s), and its laps 0.36 s (103.68 s).
-    """
-    gap = (1.0 - TimeOptimalSettings.slip_force_share) * caution
-    return 1.0 - min(gap, 0.5)
-
-
 def _iteration_model(
-    base: CarModel, correction: ModelCorrection | None, settings: LearnSettings, caution: float
+    base: CarModel, correction: ModelCorrection | None, settings: LearnSettings
 ) -> CarModel:
     """The model iteration i plans and predicts with."""
     if correction is None:
@@ -421,7 +416,6 @@ def _iteration_model(
         params=base.params.replace(correction=correction),
         grip_margin=0.0,
         edge_margin=settings.edge_margin,
-        slip_share=slip_share(caution),
     )
 
 
@@ -544,8 +538,8 @@ def _run_iteration(
             label=f"learned from {n_samples} samples, iteration {i}",
             below_speed=below,
         )
+    model = _iteration_model(base, correction, settings)
     caution = _caution(previous)
-    model = _iteration_model(base, correction, settings, caution)
     t1 = time.perf_counter()
     margin = settings.uncertainty_margin * caution
     laps: list[LapResult] = []
@@ -565,8 +559,8 @@ def _run_iteration(
         what = (
             "the model as identified"
             if correction is None
-            else f"its corrected model (uncertainty margin {margin:g} standard deviations, "
-            f"edge margin {largest_margin(model.edge_margin, track, plan_track):.2f} m)"
+            else f"its corrected model (uncertainty margin {margin:g} "
+            f"standard deviations, edge margin {_largest_margin(model, track, plan_track):.2f} m)"
         )
         raise PlanningError(
             f"learning iteration {i} could not plan a lap with {what}.{kept} Keep the best "
@@ -597,7 +591,7 @@ def _run_iteration(
         ey_max_m=float(max(m.ey_max_m for m in metrics)),
         prediction_error=errors,
         grip_margin=model.grip_margin,
-        edge_margin=largest_margin(model.edge_margin, track, plan_track),
+        edge_margin=_largest_margin(model, track, plan_track),
         caution=caution,
         samples=n_samples,
         wall_time_s={"fit": t1 - t0, "plan": plan_s, "laps": t2 - t1 - plan_s},
@@ -634,6 +628,15 @@ def _plan_and_drive(
         on_lap=on_lap,
     )
     return planned, result
+
+
+def _largest_margin(model: CarModel, track: Track, plan_track: Track) -> float | None:
+    """The largest distance a plan of ``model`` on ``plan_track`` keeps from the edges, m."""
+    if model.edge_margin is None or plan_track is track:
+        return model.edge_margin
+    knots = track.centerline.knots
+    cut = track.width_left(knots) - plan_track.width_left(knots)
+    return float(model.edge_margin + np.max(cut))
 
 
 def check_best(

@@ -20,7 +20,7 @@ from racing_lib.experiments.lap import LapLog
 from racing_lib.geometry import Track
 from racing_lib.planning.grid import DEFAULT_CAR_WIDTH
 
-__all__ = ["EDGE_SAFETY", "EXCURSION_WINDOW", "edge_excursions", "largest_margin", "planning_track"]
+__all__ = ["EDGE_SAFETY", "EXCURSION_WINDOW", "edge_excursions", "planning_track"]
 
 #: Added to the laps' largest tracking error near a point to give the least distance the next
 #: plan keeps from the edges there (:func:`planning_track`), m.
@@ -94,15 +94,3 @@ def planning_track(track: Track, logs: Sequence[LapLog], margin: float) -> Track
         name=track.name,
         corners=track.corners,
     )
-
-
-def largest_margin(margin: float | None, track: Track, plan_track: Track) -> float | None:
-    """The largest distance from the edges of ``track`` a plan on ``plan_track`` keeps, m.
-
-    ``margin``: the plan's edge margin, m (None: the planner's default, on ``track`` itself).
-    """
-    if margin is None or plan_track is track:
-        return margin
-    knots = track.centerline.knots
-    cut = track.width_left(knots) - plan_track.width_left(knots)
-    return float(margin + np.max(cut))
