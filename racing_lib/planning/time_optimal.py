@@ -136,7 +136,8 @@ def _shape_settings(st: TimeOptimalSettings) -> TimeOptimalSettings:
     shaping += ("drive_axle_circle", "uncertainty_margin", "pedal_limits")
     shaping += ("lateral_stability", "steer_rate")
     kept = {name: getattr(st, name) for name in shaping}
-    # Only the structured graph calls the derivative functions: the others need no compiler run.
+    # Only the structured graph calls the compiled functions: the others are differentiated by
+    # CasADi, which needs the interval functions symbolic.
     return TimeOptimalSettings(**kept, jit=st.jit and st.graph == "structured")
 
 

@@ -344,17 +344,17 @@ def _interval_functions(
         ca.Function("interval_obj_grad", [*args, *data], [ca.gradient(obj, v)]),
         ca.Function("interval_hess", [*args, sigma, lam, *data], [hess.nz[:]]),
     ]
-    if st.jit and st.graph == "structured":
+    if st.jit:
         # The constraints and the derivatives are evaluated at every IPOPT iteration; compiled,
         # they cost a fraction of what CasADi's interpreter takes (the same numbers to the last
         # bit). Interpreted, the constraints of a plan with a learned correction took half its
         # evaluation time. nlpsol differentiates the constraints' graph as it is built, though
         # it is handed every derivative it calls: finite differences let it, and no solve
-        # evaluates them. The other graphs are differentiated by CasADi: their constraints stay
-        # symbolic.
+        # evaluates them. (Only the structured graph gets here: the flat ones, which CasADi
+        # differentiates, run without jit, see time_optimal._shape_settings.)
         functions = compiled_or_interpreted(
             functions,
-            "the time-optimal NLP's derivatives",
+            "the time-optimal NLP's constraints and derivatives",
             "TimeOptimalSettings(jit=False)",
             name="racing_lib_nlp_interval",
             finite_differences={"interval_con"},
