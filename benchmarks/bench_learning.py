@@ -3,12 +3,14 @@
 Runs ``racing_lib.experiments.learning.learn`` on a track (default: the expressway, the simulated
 car): iteration 0 drives the model as identified with its blanket margins, each later iteration
 fits a GP correction of the model on every clean lap so far, re-plans with it (its uncertainty as
-the margin) and drives again. Then the model of the fastest clean iteration drives ``--final``
-laps on seeds no iteration used, the measure of the result.
+the margin) and drives again. Then the model of the fastest clean iteration whose laps stayed
+within their edge margins drives ``--final`` laps on seeds no iteration used, the measure of the
+result.
 
 Prints one row per iteration: planned and driven lap (mean over its seeds), the gap to the best
 possible lap (where known: the shipped table's NLP on the car's own equations), walls, time off
-track, the one-period prediction error of v_x, v_y (m/s^2) and r (rad/s^2) on the iteration's
+track, how far the laps strayed beyond the edge margin their plan kept (0: within it), the
+one-period prediction error of v_x, v_y (m/s^2) and r (rad/s^2) on the iteration's
 own laps, which no fit had seen (identified -> learned), the residual samples fitted on, and the
 wall time of fitting, planning and driving. Then the final laps: mean, spread, walls, time off
 track and the gap.
@@ -93,14 +95,16 @@ def _one_track(track: Track, args: argparse.Namespace, settings: LearnSettings) 
     best_lap = _best_possible_lap(track, result.best_possible_lap_s)
     print()
     print(f"{'it':>2} {'plan s':>8} {'driven s':>9} {'gap %':>6} {'walls':>5} {'off s':>5} "
-          f"{'pred. error v_x v_y r (identified>learned)':<43} {'samples':>7} "
+          f"{'beyond m':>8} {'pred. error v_x v_y r (identified>learned)':<43} {'samples':>7} "
           f"{'fit s':>5} {'plan s':>6} {'laps s':>6}")  # fmt: skip
     for it in result.iterations:
         driven = "-" if it.driven_lap_s is None else f"{it.driven_lap_s:.2f}"
         gap = "-" if it.driven_lap_s is None else f"{_gap(it.driven_lap_s, best_lap):+.2f}"
         fit, plan_s, laps_s = (it.wall_time_s.get(k, 0.0) for k in ("fit", "plan", "laps"))
+        excess = it.margin_excess_m
+        beyond = "-" if excess is None else f"{max(excess, 0.0):.2f}"
         print(f"{it.iteration:>2} {it.planned_lap_s:>8.2f} {driven:>9} {gap:>6} {it.walls:>5} "
-              f"{it.offtrack_s:>5.1f} {_errors(it):<43} {it.samples:>7} "
+              f"{it.offtrack_s:>5.1f} {beyond:>8} {_errors(it):<43} {it.samples:>7} "
               f"{fit:>5.1f} {plan_s:>6.1f} {laps_s:>6.1f}")  # fmt: skip
     summary = {**result.to_dict(), "best_possible_lap_s": best_lap}
     for it in summary["iterations"]:  # where the loop did not know the best lap, it is known now

@@ -26,12 +26,15 @@ from racing_lib.experiments.learning import (
     LearnSettings,
     _caution,
     _iteration_model,
+    _line,
     edge_excursions,
     known_best_lap,
     learn,
     planning_track,
+    slip_share,
 )
 from racing_lib.experiments.pipeline import race
+from racing_lib.experiments.track_margins import margin_excess
 from racing_lib.face.cli import main
 from racing_lib.model import (
     CarModel,
@@ -49,6 +52,7 @@ from racing_lib.model.residuals import (
     one_step_errors,
     residual_samples,
 )
+from racing_lib.planning import TimeOptimalSettings
 from racing_lib.tracks import load_track
 
 
@@ -263,6 +267,53 @@ def test_the_edge_margin_follows_the_laps_along_the_track(two_laps):
     assert total.min() >= DEFAULT_CAR_WIDTH + 2 * 0.4
 
 
+def test_the_laps_beyond_their_margin_are_measured_where_they_strayed(two_laps):
+    track, (lap, _) = two_laps
+    on_line = _with_excursion(track, lap, 1000.0, 0.0)
+    # on the track itself, the plan's 0.4 m margin: 0.7 m off the line is 0.3 m beyond it,
+    # whichever side; a lap on its line is 0.4 m inside it
+    assert margin_excess([on_line], track, track, 0.4) == pytest.approx(-0.4)
+    assert margin_excess([_with_excursion(track, lap, 1000.0, 0.7)], track, track, 0.4) == (
+        pytest.approx(0.3)
+    )
+    assert margin_excess([_with_excursion(track, lap, 1000.0, -0.7)], track, track, 0.4) == (
+        pytest.approx(0.3)
+    )
+    # the worst lap counts; no margin given: the planner's default (0.8 m on this track)
+    two = [on_line, _with_excursion(track, lap, 2000.0, 0.5)]
+    assert margin_excess(two, track, track, 0.4) == pytest.approx(0.1)
+    assert margin_excess(two, track, track, None) == pytest.approx(-0.3)
+    assert margin_excess([], track, track, 0.4) is None
+    # where the plan was made on a narrowed track, the margin there is wider by the narrowing:
+    # the same excursion is within it at that point, and beyond it elsewhere
+    narrowed = planning_track(track, [_with_excursion(track, lap, 1000.0, 1.2)], 0.4)
+    assert margin_excess([_with_excursion(track, lap, 1000.0, 1.2)], track, narrowed, 0.4) == (
+        pytest.approx(-EDGE_SAFETY, abs=1e-3)
+    )
+    assert margin_excess([_with_excursion(track, lap, 3000.0, 1.2)], track, narrowed, 0.4) == (
+        pytest.approx(0.8, abs=1e-6)
+    )
+
+
+def test_the_result_is_the_fastest_clean_iteration_that_kept_within_its_margins():
+    beyond = dataclasses.replace(_iteration(2, driven=103.5), margin_excess_m=0.3)
+    within = dataclasses.replace(_iteration(3, driven=103.9), margin_excess_m=-0.1)
+    unmeasured = _iteration(1, driven=104.2)  # a run kept before the excess was measured
+    wall = dataclasses.replace(_iteration(4, clean=False, driven=103.0), margin_excess_m=-0.2)
+    assert beyond.clean and not beyond.within_margins and within.within_margins
+    assert unmeasured.within_margins and not wall.within_margins
+    run = LearningRun("expressway", None, [_iteration(0, driven=105.0), unmeasured, beyond,
+                                           within, wall])  # fmt: skip
+    assert run.best() is within
+    # with no clean iteration within its margins, the fastest clean one
+    assert LearningRun("expressway", None, [beyond, wall]).best() is beyond
+    assert LearningRun("expressway", None, [wall]).best() is None
+    # the JSON of the command carries it, and the line for people says it
+    assert run.to_dict()["iterations"][2]["margin_excess_m"] == 0.3
+    assert "0.30 m beyond its edge margin" in _line(beyond)
+    assert "beyond" not in _line(within) and "beyond" not in _line(unmeasured)
+
+
 def test_learning_improves_the_prediction_of_an_unseen_lap(two_laps):
     track, (seen, unseen) = two_laps
     model = identified_model()
@@ -443,9 +494,13 @@ def test_the_margins_follow_what_the_laps_showed():
     # the edge margin of a learned model is the settings' (where laps strayed further, the track
     # the plan is made on is narrower: planning_track)
     base, corr, settings = identified_model(), _correction(), LearnSettings(edge_margin=0.4)
-    assert _iteration_model(base, None, settings) is base
-    learned = _iteration_model(base, corr, settings)
+    assert _iteration_model(base, None, settings, 1.0) is base
+    learned = _iteration_model(base, corr, settings, 1.0)
     assert learned.edge_margin == 0.4 and learned.grip_margin == 0.0
+    # the slip margin below the tyres' peak force: the planner's 5 % times the caution
+    assert learned.slip_share == pytest.approx(TimeOptimalSettings().slip_force_share)
+    assert _iteration_model(base, corr, settings, 0.5).slip_share == pytest.approx(0.975)
+    assert slip_share(2.0) == pytest.approx(0.9) and slip_share(64.0) == 0.5
 
 
 def test_a_run_reports_its_gain_over_the_identified_model():

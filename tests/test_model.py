@@ -647,3 +647,23 @@ def test_a_car_models_lateral_stability_is_checked_and_kept():
     for bad in (-1.0, True, float("nan")):
         with pytest.raises(ModelError, match="lateral_stability"):
             CarModel(ModelParams(), lateral_stability=bad)
+
+
+def test_a_car_models_slip_margin_is_checked_kept_and_planned_with():
+    from racing_lib.model import CarModel
+    from racing_lib.planning import CurvatureSettings, TimeOptimalSettings, _with_grid
+
+    model = CarModel(ModelParams(), slip_share=0.975)
+    assert CarModel.from_dict(model.to_dict()) == model
+    assert "slip to 97.5% of peak" in model.describe()
+    # a model without one writes the file it wrote before the field existed
+    assert "slip_share" not in CarModel(ModelParams()).to_dict()
+    for bad in (0.0, 1.2, -0.5, True, float("nan")):
+        with pytest.raises(ModelError, match="slip_share"):
+            CarModel(ModelParams(), slip_share=bad)
+    # the time-optimal planner keeps the slip angles where the model says; without one, where
+    # its settings say
+    assert _with_grid(TimeOptimalSettings(), 3.0, model).slip_force_share == 0.975
+    plain = CarModel(ModelParams())
+    assert _with_grid(TimeOptimalSettings(slip_force_share=0.9), 3.0, plain).slip_force_share == 0.9
+    assert _with_grid(CurvatureSettings(), 3.0, model).spacing == 3.0

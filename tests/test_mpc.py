@@ -19,6 +19,7 @@ from racing_lib.control.mpc import (
     expm_batch,
     steering_lag_coefficients,
 )
+from racing_lib.control.mpc.coupled import LEARNED_SLIP_SHARE
 from racing_lib.control.mpc.qp_cvxpy import CvxpyTrackingQP
 from racing_lib.control.mpc.qp_osqp import TrackingQP
 from racing_lib.control.mpc.qp_problem import (
@@ -806,6 +807,10 @@ def test_with_a_learned_model_the_mpc_keeps_the_front_tyres_below_their_peak(cir
     mpc = CoupledMPC(plan, CarModel(learned), settings=st)
     limit = mpc.front_slip_limit
     assert 0.0 < limit < params.peak_slip_angle()[0]
+    assert limit == params.slip_angle_at(LEARNED_SLIP_SHARE)[0]
+    # a model with a slip margin of its own (the learning loop's) is held to that one
+    closer = CoupledMPC(plan, CarModel(learned, slip_share=0.975), settings=st)
+    assert closer.front_slip_limit == params.slip_angle_at(0.975)[0] > limit
     xi_hat = np.zeros((8, 6))
     xi_hat[:, X.VX], xi_hat[:, X.VY], xi_hat[:, X.R] = 20.0, -1.0, 0.25
     heading = (-1.0 + params.l_f * 0.25) / 20.0  # (v_y + l_f r) / v_x: alpha_f = delta - heading

@@ -28,13 +28,21 @@ What replaces the blanket margins in a learned iteration:
   of the lap, as a margin of the laps' largest error did: on circuits that error came from one
   corner, and the later iterations' plans slowed down everywhere.
 
+* the **slip margin** (the plans keep the tyres' slip angles where they give at most 95 % of their
+  peak force: the identified tyre curves are broader than the car's) shrinks with the caution
+  below: the learned plans may use ``1 - 5 % caution`` of the peak (:func:`slip_share`).
+
 A lap that touched a wall or left the track is not learned from (its log holds the wall's forces,
-not the car's). The factor on the uncertainty margin (the iteration's *caution*) is set by how the
-learned iteration before went: doubled after one that was not clean, halved after a clean one,
-down to :data:`MIN_CAUTION`. The MPC predicting with a learned model keeps the front tyres'
-slip angle within the planner's slip limit
-(:data:`racing_lib.control.mpc.coupled.LEARNED_SLIP_SHARE`): without that bound, laps on circuits
-with hairpins left the track.
+not the car's). The factor on the uncertainty and slip margins (the iteration's *caution*) is set
+by how the learned iteration before went: doubled after one that was not clean, halved after a
+clean one, down to :data:`MIN_CAUTION`. The MPC predicting with a learned model keeps the front
+tyres' slip angle within the plan's slip margin (``CarModel.slip_share``): without that bound,
+laps on circuits with hairpins left the track.
+
+The run's result (:meth:`LearningRun.best`) is its fastest clean iteration whose laps stayed
+within the edge margins their plan kept: four clean laps that strayed beyond them were clean only
+because they strayed where their line was not beside a wall
+(:func:`~racing_lib.experiments.track_margins.margin_excess`).
 
 Every finished iteration is written to its own folder, with the run's track, settings and model
 in ``run.json``, so an interrupted run resumes where it stopped and loses no finished iteration;
@@ -48,7 +56,7 @@ import math
 import os
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 from zipfile import BadZipFile
@@ -56,12 +64,16 @@ from zipfile import BadZipFile
 import numpy as np
 
 from racing_lib.errors import ArgumentError, ModelError, PlanningError
+from racing_lib.experiments.ablation.table import known_best_lap
 from racing_lib.experiments.lap import LapLog, LapResult, PlantFactory
+from racing_lib.experiments.learning_results import IterationResult, LearningRun
 from racing_lib.experiments.pipeline import RaceResult, race
 from racing_lib.experiments.track_margins import (
     EDGE_SAFETY,
     EXCURSION_WINDOW,
     edge_excursions,
+    largest_margin,
+    margin_excess,
     planning_track,
 )
 from racing_lib.geometry import Track
@@ -89,6 +101,7 @@ __all__ = [
     "known_best_lap",
     "learn",
     "planning_track",
+    "slip_share",
 ]
 
 #: Smallest factor on the uncertainty margin that clean iterations may bring the loop to.
@@ -149,153 +162,6 @@ class LearnSettings:
         band = self.top_speed_band
         if not (isinstance(band, int | float) and 0.0 <= band < 0.5):
             raise ArgumentError(f"LearnSettings.top_speed_band must be in [0, 0.5), got {band!r}.")
-
-
-@dataclass
-class IterationResult:
-    """One iteration of the loop, as written to its folder and printed by ``racing-lib learn``.
-
-    Attributes
-    ----------
-    iteration : int
-        0 for the model as identified, then 1, 2, ...
-    planned_lap_s : float
-        The plan's lap time, s.
-    driven_lap_s : float or None
-        Mean closed-loop lap time over the iteration's completed laps, s.
-    driven_lap_std_s : float or None
-        Their standard deviation, s.
-    gap_to_best_pct : float or None
-        ``driven_lap_s`` over the best possible lap, minus one, % (None when unknown).
-    walls : int
-        Wall contacts over all the iteration's laps.
-    offtrack_s : float
-        Time off the track over all its laps, s.
-    completed : int
-        Laps completed (of ``laps``).
-    laps : int
-        Laps driven.
-    ey_max_m : float
-        Largest lateral distance to the plan's line over the laps, m.
-    prediction_error : dict
-        One-period RMS prediction error of ``v_x``, ``v_y`` (m/s^2) and ``r`` (rad/s^2) on this
-        iteration's laps, which no correction has seen: ``{"identified": {...}, "learned":
-        {...}}`` (``learned`` is None in iteration 0).
-    grip_margin : float
-        The share of friction the plan left unused.
-    edge_margin : float or None
-        The largest distance the plan kept from the track's edges, m (None: the planner's
-        default); after a clean learned iteration, the margin varies along the track
-        (:func:`planning_track`).
-    caution : float
-        Factor on the settings' uncertainty margin: 1 in the first learned iteration, then
-        halved after a clean iteration (down to :data:`MIN_CAUTION`) and doubled after one that
-        was not clean.
-    samples : int
-        Residual samples the correction was fitted on (0 in iteration 0).
-    wall_time_s : dict
-        Seconds spent fitting, planning and driving.
-    """
-
-    iteration: int
-    planned_lap_s: float
-    driven_lap_s: float | None
-    driven_lap_std_s: float | None
-    gap_to_best_pct: float | None
-    walls: int
-    offtrack_s: float
-    completed: int
-    laps: int
-    ey_max_m: float
-    prediction_error: dict[str, dict[str, float] | None]
-    grip_margin: float
-    edge_margin: float | None
-    caution: float
-    samples: int
-    wall_time_s: dict[str, float] = field(default_factory=dict)
-
-    @property
-    def clean(self) -> bool:
-        """Every lap completed, without wall contact or time off the track."""
-        return self.completed == self.laps and self.walls == 0 and self.offtrack_s == 0.0
-
-
-@dataclass
-class LearningRun:
-    """What :func:`learn` returns: the iterations and where they are kept.
-
-    Attributes
-    ----------
-    track : str
-        Name of the track.
-    best_possible_lap_s : float or None
-        The best possible lap of the simulated car on this track, where racing_lib knows it.
-    iterations : list of IterationResult
-    models : list of CarModel
-        The model each iteration planned and predicted with, correction included.
-    plan_tracks : list of Track
-        The track each iteration planned on: the track itself, or the track narrowed by the
-        tracking errors of the iteration before (:func:`planning_track`).
-    out : Path or None
-        The folder of the run.
-    """
-
-    track: str
-    best_possible_lap_s: float | None
-    iterations: list[IterationResult]
-    models: list[CarModel] = field(default_factory=list, repr=False)
-    plan_tracks: list[Track] = field(default_factory=list, repr=False)
-    out: Path | None = None
-
-    def to_dict(self) -> dict[str, Any]:
-        """The JSON object of ``racing-lib learn --json``.
-
-        Each iteration has its fields and ``gain_over_identified_pct`` (:meth:`gain_pct`), the
-        measure of a car whose best possible lap nobody knows.
-        """
-        return {
-            "track": self.track,
-            "best_possible_lap_s": self.best_possible_lap_s,
-            "identified_lap_s": self.identified_lap_s,
-            "iterations": [
-                {**asdict(it), "gain_over_identified_pct": self.gain_pct(it)}
-                for it in self.iterations
-            ],
-        }
-
-    @property
-    def identified_lap_s(self) -> float | None:
-        """Iteration 0's driven lap (the model as identified), s; None before or without one."""
-        return self.iterations[0].driven_lap_s if self.iterations else None
-
-    def gain_pct(self, it: IterationResult) -> float | None:
-        """How much faster ``it`` drove than iteration 0 (the model as identified), %.
-
-        None when either did not complete a lap.
-        """
-        first = self.identified_lap_s
-        if first is None or it.driven_lap_s is None:
-            return None
-        return 100.0 * (1.0 - it.driven_lap_s / first)
-
-    def best(self) -> IterationResult | None:
-        """The fastest clean iteration."""
-        clean = [it for it in self.iterations if it.clean and it.driven_lap_s is not None]
-        return min(clean, key=lambda it: it.driven_lap_s or math.inf) if clean else None
-
-
-def known_best_lap(track: Track) -> float | None:
-    """The best possible lap of the simulated car on ``track``, s, where it is known.
-
-    From the shipped ablation table's ``best-lap`` row (an NLP on the car's own equations,
-    :mod:`racing_lib.planning.best_lap`), when the track is the one it was planned on.
-    """
-    from racing_lib.experiments.ablation.table import shipped_table
-
-    for row in shipped_table():
-        if row.get("name") == "best-lap" and row.get("track_checksum") == track.checksum():
-            return float(row["planned_lap_time_s"])
-    return None
 
 
 def _run_identity(
@@ -404,8 +270,21 @@ def _follows_laps(previous: IterationResult | None) -> bool:
     return previous is not None and previous.iteration > 0 and previous.clean
 
 
+def slip_share(caution: float) -> float:
+    """The share of the tyres' peak force a learned iteration's slip angles are kept to.
+
+    The planner's margin below the peak (5 %, ``TimeOptimalSettings.slip_force_share``) stands
+    in for what the model does not know of the tyres near it. Learned iterations scale it by
+    their caution, as they do the uncertainty margin: 5 % in the first, 2.5 % after a clean one,
+    10 % after one that was not clean (at most 50 %). On the expressway, 2.5 % instead of 5 %
+    made the second iteration's plan 0.34 s faster (103.26 s), and its laps 0.36 s (103.68 s).
+    """
+    gap = (1.0 - TimeOptimalSettings.slip_force_share) * caution
+    return 1.0 - min(gap, 0.5)
+
+
 def _iteration_model(
-    base: CarModel, correction: ModelCorrection | None, settings: LearnSettings
+    base: CarModel, correction: ModelCorrection | None, settings: LearnSettings, caution: float
 ) -> CarModel:
     """The model iteration i plans and predicts with."""
     if correction is None:
@@ -416,6 +295,7 @@ def _iteration_model(
         params=base.params.replace(correction=correction),
         grip_margin=0.0,
         edge_margin=settings.edge_margin,
+        slip_share=slip_share(caution),
     )
 
 
@@ -538,8 +418,8 @@ def _run_iteration(
             label=f"learned from {n_samples} samples, iteration {i}",
             below_speed=below,
         )
-    model = _iteration_model(base, correction, settings)
     caution = _caution(previous)
+    model = _iteration_model(base, correction, settings, caution)
     t1 = time.perf_counter()
     margin = settings.uncertainty_margin * caution
     laps: list[LapResult] = []
@@ -559,8 +439,8 @@ def _run_iteration(
         what = (
             "the model as identified"
             if correction is None
-            else f"its corrected model (uncertainty margin {margin:g} "
-            f"standard deviations, edge margin {_largest_margin(model, track, plan_track):.2f} m)"
+            else f"its corrected model (uncertainty margin {margin:g} standard deviations, "
+            f"edge margin {largest_margin(model.edge_margin, track, plan_track):.2f} m)"
         )
         raise PlanningError(
             f"learning iteration {i} could not plan a lap with {what}.{kept} Keep the best "
@@ -591,10 +471,13 @@ def _run_iteration(
         ey_max_m=float(max(m.ey_max_m for m in metrics)),
         prediction_error=errors,
         grip_margin=model.grip_margin,
-        edge_margin=_largest_margin(model, track, plan_track),
+        edge_margin=largest_margin(model.edge_margin, track, plan_track),
         caution=caution,
         samples=n_samples,
         wall_time_s={"fit": t1 - t0, "plan": plan_s, "laps": t2 - t1 - plan_s},
+        margin_excess_m=margin_excess(
+            [lap.log for lap in laps], track, plan_track, model.edge_margin
+        ),
     )
     if out is not None:
         _save_done(out, iteration, laps, model)
@@ -630,15 +513,6 @@ def _plan_and_drive(
     return planned, result
 
 
-def _largest_margin(model: CarModel, track: Track, plan_track: Track) -> float | None:
-    """The largest distance a plan of ``model`` on ``plan_track`` keeps from the edges, m."""
-    if model.edge_margin is None or plan_track is track:
-        return model.edge_margin
-    knots = track.centerline.knots
-    cut = track.width_left(knots) - plan_track.width_left(knots)
-    return float(model.edge_margin + np.max(cut))
-
-
 def check_best(
     run: LearningRun,
     track: str | os.PathLike[str] | Track,
@@ -648,7 +522,7 @@ def check_best(
     seed: int | None = None,
     car: PlantFactory | None = None,
 ) -> dict[str, Any]:
-    """Drive the model of the fastest clean iteration on seeds no iteration used.
+    """Drive the model of the run's result (:meth:`LearningRun.best`) on seeds no iteration used.
 
     Re-plans with that model (with the run's ``settings``, its iteration's caution, on the
     track that iteration planned on) and drives ``laps`` seeded laps from ``seed`` on; default:
@@ -693,8 +567,10 @@ def _line(it: IterationResult) -> str:
     """One line for people about an iteration."""
     driven = "not completed" if it.driven_lap_s is None else f"{it.driven_lap_s:.2f} s"
     gap = "" if it.gap_to_best_pct is None else f" ({it.gap_to_best_pct:+.2f} % on the best lap)"
+    excess = it.margin_excess_m
+    beyond = "" if excess is None or excess <= 0.0 else f", {excess:.2f} m beyond its edge margin"
     return (
         f"iteration {it.iteration}: plan {it.planned_lap_s:.2f} s, driven {driven}{gap}, "
-        f"{it.walls} wall contacts, {it.offtrack_s:.1f} s off track, "
+        f"{it.walls} wall contacts, {it.offtrack_s:.1f} s off track{beyond}, "
         f"{sum(it.wall_time_s.values()):.0f} s"
     )

@@ -84,6 +84,13 @@ class CarModel:
         braked with the steering held: the margin is how much faster it diverged than the
         model said. None (default): no such bound, as for the simulated car, which stays
         stable there.
+    slip_share : float or None
+        The tyres' slip margin, in (0, 1]: the plans keep both axles' slip angles where the
+        tyres give at most this share of their peak force, and an MPC predicting with a learned
+        correction keeps the front axle's there too. None (default): the planner's setting
+        (:attr:`racing_lib.planning.TimeOptimalSettings.slip_force_share`, 95 %) and, with a
+        correction, :data:`racing_lib.control.mpc.coupled.LEARNED_SLIP_SHARE`. The learning loop
+        sets it from how its iterations went (:mod:`racing_lib.experiments.learning`).
 
     Examples
     --------
@@ -104,6 +111,7 @@ class CarModel:
     edge_margin: float | None = None
     v_top: float = DEFAULT_V_TOP
     lateral_stability: float | None = None
+    slip_share: float | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.params, ModelParams):
@@ -128,6 +136,8 @@ class CarModel:
             self._check_number(
                 "lateral_stability", "1/s", lambda v: math.isfinite(v) and v >= 0, ">= 0 or None"
             )
+        if self.slip_share is not None:
+            self._check_number("slip_share", "", lambda v: 0.0 < v <= 1.0, "in (0, 1] or None")
 
     def _check_number(self, name: str, unit: str, ok: Callable[[float], bool], rule: str) -> None:
         """Store field ``name`` as a float, refusing a value that breaks ``rule``."""
@@ -187,16 +197,21 @@ class CarModel:
             if self.lateral_stability is None
             else f", stability margin {self.lateral_stability:.2f} 1/s"
         )
+        slip = "" if self.slip_share is None else f", slip to {100 * self.slip_share:.3g}% of peak"
         return (
             f"mu {self.params.mu:.3f}, {self.options.label()}, steering lag "
             f"{self.steer_tau:.3f} s, grip margin {100 * self.grip_margin:.2g}%, edge margin {edge}"
-            f"{stable}"
+            f"{stable}{slip}"
         )
 
     # --- files ------------------------------------------------------------------------------------
     def to_dict(self) -> JSONObject:
-        """JSON-ready dictionary (floats kept exactly: JSON writes their shortest repr)."""
-        return {
+        """JSON-ready dictionary (floats kept exactly: JSON writes their shortest repr).
+
+        ``slip_share`` is written only when set, so the files of models without one are those
+        written before it existed.
+        """
+        data: JSONObject = {
             "params": self.params.to_dict(),
             "options": dataclasses.asdict(self.options),
             "steer_tau": self.steer_tau,
@@ -207,6 +222,9 @@ class CarModel:
             "v_top": self.v_top,
             "lateral_stability": self.lateral_stability,
         }
+        if self.slip_share is not None:
+            data["slip_share"] = self.slip_share
+        return data
 
     @classmethod
     def from_dict(cls, data: Mapping[str, object]) -> CarModel:

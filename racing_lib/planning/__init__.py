@@ -248,12 +248,15 @@ _Settings = TypeVar("_Settings", CurvatureSettings, TimeOptimalSettings)
 def _with_grid(settings: _Settings, spacing: float, model: CarModel) -> _Settings:
     """Planner settings with the node spacing (m) and the model's margin and top speed.
 
-    The model's edge margin (m) applies if it has one; its top speed (m/s) and its lateral
-    stability margin (1/s, when it has one) where the settings leave them open.
+    The model's edge margin (m) and slip margin (a share of the tyres' peak force) apply if it
+    has them; its top speed (m/s) and its lateral stability margin (1/s, when it has one) where
+    the settings leave them open.
     """
     changes: dict[str, float] = {"spacing": spacing}
     if model.edge_margin is not None:
         changes["margin"] = model.edge_margin
+    if model.slip_share is not None and isinstance(settings, TimeOptimalSettings):
+        changes["slip_force_share"] = model.slip_share
     if model.lateral_stability is not None and isinstance(settings, TimeOptimalSettings):
         if settings.lateral_stability is None:
             changes["lateral_stability"] = model.lateral_stability

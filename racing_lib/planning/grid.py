@@ -17,7 +17,7 @@ from racing_lib.geometry import Track
 from racing_lib.geometry.path import Path, chord_arc_length
 from racing_lib.vehicle.params import VehicleParams
 
-__all__ = ["DEFAULT_CAR_WIDTH", "OPEN_MARGIN", "WALL_MARGIN", "TrackGrid"]
+__all__ = ["DEFAULT_CAR_WIDTH", "OPEN_MARGIN", "WALL_MARGIN", "TrackGrid", "default_margin"]
 
 #: Body width of the default car (racing_lib.vehicle.VehicleParams.width), m.
 DEFAULT_CAR_WIDTH = VehicleParams().width
@@ -30,6 +30,14 @@ WALL_MARGIN = 0.8
 #: circuits (Austin, Spielberg) were left for seconds at their slow corners, where the car runs
 #: half a metre wide of the plan.
 OPEN_MARGIN = 0.8
+
+
+def default_margin(track: Track) -> float:
+    """The clearance to the edges a plan keeps on ``track`` when given none, m.
+
+    :data:`WALL_MARGIN` on a track with walls, :data:`OPEN_MARGIN` on an open one.
+    """
+    return WALL_MARGIN if getattr(track, "boundary", "open") == "walls" else OPEN_MARGIN
 
 
 @dataclass(frozen=True)
@@ -98,7 +106,7 @@ class TrackGrid:
         n = max(16, int(round(line.length / spacing)))
         s = np.asarray(line.sample(n=n), float)
         if margin is None:
-            margin = WALL_MARGIN if getattr(track, "boundary", "open") == "walls" else OPEN_MARGIN
+            margin = default_margin(track)
         half = 0.5 * car_width + margin
         wl = np.asarray(track.width_left(s), float)
         wr = np.asarray(track.width_right(s), float)

@@ -30,7 +30,8 @@ from racing_lib.planning.trajectory import Trajectory
 __all__ = ["LEARNED_SLIP_SHARE", "CoupledMPC", "QPSolver"]
 
 #: With a learned model, the MPC keeps the front tyres' slip angle where they give at most this
-#: share of their peak force (the planner's ``TimeOptimalSettings.slip_force_share``).
+#: share of their peak force (the planner's ``TimeOptimalSettings.slip_force_share``), unless the
+#: model has a slip margin of its own (``CarModel.slip_share``).
 LEARNED_SLIP_SHARE = 0.95
 
 
@@ -70,8 +71,9 @@ class CoupledMPC(MPCBase):
     ----------
     front_slip_limit : float or None
         With a model that carries a learned correction: the front slip angle the steering
-        command keeps to (rad; :meth:`steering_within_slip`, :data:`LEARNED_SLIP_SHARE` of the
-        peak force). None for a model as identified, whose MPC is the paper's.
+        command keeps to (rad; :meth:`steering_within_slip`; the model's ``slip_share`` of the
+        peak force, or :data:`LEARNED_SLIP_SHARE`). None for a model as identified, whose MPC is
+        the paper's.
 
     Examples
     --------
@@ -129,8 +131,9 @@ class CoupledMPC(MPCBase):
         # bounds the slip angles; with a learned model the MPC does too, on the front axle,
         # which the steering acts on. The model as identified is left as the paper has it.
         params = self.model.params
+        share = self.model.slip_share or LEARNED_SLIP_SHARE
         self.front_slip_limit = (
-            params.slip_angle_at(LEARNED_SLIP_SHARE)[0] if params.correction is not None else None
+            params.slip_angle_at(share)[0] if params.correction is not None else None
         )
 
     def use_qp(self, solver: QPSolver) -> None:

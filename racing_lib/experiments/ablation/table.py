@@ -35,6 +35,7 @@ __all__ = [
     "TableFile",
     "format_table",
     "generate_ablation_table",
+    "known_best_lap",
     "load_table",
     "shipped_table",
     "shipped_table_file",
@@ -197,6 +198,18 @@ def shipped_table_file() -> TableFile:
         )
     with resources.as_file(ref) as path:
         return load_table(path)
+
+
+def known_best_lap(track: Track) -> float | None:
+    """The best possible lap of the simulated car on ``track``, s, where it is known.
+
+    From the shipped table's ``best-lap`` row (an NLP on the car's own equations,
+    :mod:`racing_lib.planning.best_lap`), when the track is the one it was planned on.
+    """
+    for row in shipped_table():
+        if row.get("name") == "best-lap" and row.get("track_checksum") == track.checksum():
+            return float(row["planned_lap_time_s"])
+    return None
 
 
 def shipped_table() -> list[TableRow]:
