@@ -9,10 +9,10 @@ result.
 
 Prints one row per iteration: planned and driven lap (mean over its seeds), the gap to the best
 possible lap (where known: the shipped table's NLP on the car's own equations), walls, time off
-track, how far the laps strayed beyond the edge margin their plan kept (0: within it), the
-one-period prediction error of v_x, v_y (m/s^2) and r (rad/s^2) on the iteration's
-own laps, which no fit had seen (identified -> learned), the residual samples fitted on, and the
-wall time of fitting, planning and driving. Then the final laps: mean, spread, walls, time off
+track, how far the laps strayed beyond the edge margins their plan kept (m; "-": within them),
+the one-period prediction error of v_x, v_y (m/s^2) and r (rad/s^2) on the iteration's own laps,
+which no fit had seen (identified -> learned), the residual samples fitted on, and the wall time of
+fitting, planning and driving. Then the final laps: mean, spread, walls, time off
 track and the gap.
 
 The run is kept in ``--out`` (default runs/learning_TRACK) and resumes where it stopped; delete
@@ -45,6 +45,7 @@ from _script import argument_parser, run
 
 from racing_lib.errors import RacingLibError
 from racing_lib.experiments.learning import LearnSettings, check_best, learn
+from racing_lib.experiments.learning_results import beyond_text
 from racing_lib.geometry import Track
 from racing_lib.io import atomic_write_json
 from racing_lib.planning.best_lap import solve_best_lap
@@ -101,8 +102,7 @@ def _one_track(track: Track, args: argparse.Namespace, settings: LearnSettings) 
         driven = "-" if it.driven_lap_s is None else f"{it.driven_lap_s:.2f}"
         gap = "-" if it.driven_lap_s is None else f"{_gap(it.driven_lap_s, best_lap):+.2f}"
         fit, plan_s, laps_s = (it.wall_time_s.get(k, 0.0) for k in ("fit", "plan", "laps"))
-        excess = it.margin_excess_m
-        beyond = "-" if excess is None else f"{max(excess, 0.0):.2f}"
+        beyond = beyond_text(it.margin_excess_m).removesuffix(" m")
         print(f"{it.iteration:>2} {it.planned_lap_s:>8.2f} {driven:>9} {gap:>6} {it.walls:>5} "
               f"{it.offtrack_s:>5.1f} {beyond:>8} {_errors(it):<43} {it.samples:>7} "
               f"{fit:>5.1f} {plan_s:>6.1f} {laps_s:>6.1f}")  # fmt: skip

@@ -33,6 +33,7 @@ from racing_lib.experiments.learning import (
     planning_track,
     slip_share,
 )
+from racing_lib.experiments.learning_results import beyond_text
 from racing_lib.experiments.pipeline import race
 from racing_lib.experiments.track_margins import margin_excess
 from racing_lib.face.cli import main
@@ -53,6 +54,7 @@ from racing_lib.model.residuals import (
     residual_samples,
 )
 from racing_lib.planning import TimeOptimalSettings
+from racing_lib.planning.grid import default_margin
 from racing_lib.tracks import load_track
 
 
@@ -279,11 +281,19 @@ def test_the_laps_beyond_their_margin_are_measured_where_they_strayed(two_laps):
     assert margin_excess([_with_excursion(track, lap, 1000.0, -0.7)], track, track, 0.4) == (
         pytest.approx(0.3)
     )
-    # the worst lap counts; no margin given: the planner's default (0.8 m on this track)
+    # the worst lap counts; no margin given: the planner's default on this track
     two = [on_line, _with_excursion(track, lap, 2000.0, 0.5)]
     assert margin_excess(two, track, track, 0.4) == pytest.approx(0.1)
-    assert margin_excess(two, track, track, None) == pytest.approx(-0.3)
+    assert margin_excess(two, track, track, None) == pytest.approx(0.5 - default_margin(track))
     assert margin_excess([], track, track, 0.4) is None
+    # only the lap between its line crossings counts (the whole log of one that never crossed)
+    outside = _with_excursion(track, lap, 1000.0, 0.0)
+    outside.ey[int(np.argmin(lap.in_lap))] = 3.0
+    assert not lap.in_lap.all() and margin_excess([outside], track, track, 0.4) == (
+        pytest.approx(-0.4)
+    )
+    never = dataclasses.replace(outside, in_lap=np.zeros_like(lap.in_lap))
+    assert margin_excess([never], track, track, 0.4) == pytest.approx(2.6)
     # where the plan was made on a narrowed track, the margin there is wider by the narrowing:
     # the same excursion is within it at that point, and beyond it elsewhere
     narrowed = planning_track(track, [_with_excursion(track, lap, 1000.0, 1.2)], 0.4)
@@ -295,23 +305,33 @@ def test_the_laps_beyond_their_margin_are_measured_where_they_strayed(two_laps):
     )
 
 
+def _excess(i: int, driven: float, excess: float | None, clean: bool = True) -> IterationResult:
+    return dataclasses.replace(_iteration(i, driven=driven, clean=clean), margin_excess_m=excess)
+
+
 def test_the_result_is_the_fastest_clean_iteration_that_kept_within_its_margins():
-    beyond = dataclasses.replace(_iteration(2, driven=103.5), margin_excess_m=0.3)
-    within = dataclasses.replace(_iteration(3, driven=103.9), margin_excess_m=-0.1)
-    unmeasured = _iteration(1, driven=104.2)  # a run kept before the excess was measured
-    wall = dataclasses.replace(_iteration(4, clean=False, driven=103.0), margin_excess_m=-0.2)
+    beyond = _excess(2, 103.5, 0.3)
+    within = _excess(3, 103.9, -0.1)
+    wall = _excess(4, 103.0, -0.2, clean=False)
     assert beyond.clean and not beyond.within_margins and within.within_margins
-    assert unmeasured.within_margins and not wall.within_margins
-    run = LearningRun("expressway", None, [_iteration(0, driven=105.0), unmeasured, beyond,
-                                           within, wall])  # fmt: skip
+    assert _excess(5, 104.0, 0.0).within_margins and not _excess(5, 104.0, 1e-4).within_margins
+    assert not wall.within_margins
+    run = LearningRun("expressway", None, [_excess(0, 105.0, -0.3), _excess(1, 104.2, -0.2),
+                                           beyond, within, wall])  # fmt: skip
     assert run.best() is within
+    # not measured (no lap to measure): counted as within
+    unmeasured = _excess(6, 103.8, None)
+    assert LearningRun("expressway", None, [within, unmeasured]).best() is unmeasured
     # with no clean iteration within its margins, the fastest clean one
-    assert LearningRun("expressway", None, [beyond, wall]).best() is beyond
+    slower_beyond = _excess(7, 103.7, 0.1)
+    assert LearningRun("expressway", None, [slower_beyond, beyond, wall]).best() is beyond
     assert LearningRun("expressway", None, [wall]).best() is None
     # the JSON of the command carries it, and the line for people says it
     assert run.to_dict()["iterations"][2]["margin_excess_m"] == 0.3
-    assert "0.30 m beyond its edge margin" in _line(beyond)
+    assert "0.30 m beyond its edge margins" in _line(beyond)
     assert "beyond" not in _line(within) and "beyond" not in _line(unmeasured)
+    # however little beyond, a table does not show it as nothing
+    assert beyond_text(0.003) == "< 0.01 m" and beyond_text(0.0) == beyond_text(None) == "-"
 
 
 def test_learning_improves_the_prediction_of_an_unseen_lap(two_laps):
@@ -441,6 +461,15 @@ def test_the_loop_keeps_and_resumes_its_iterations(tmp_path):
     laps_1 = [LapLog.load(tmp_path / "iteration_01" / name) for name in names]
     assert two.plan_tracks[2].checksum() == planning_track(track, laps_1, 0.4).checksum()
     assert two.models[2].edge_margin == 0.4 <= two.iterations[2].edge_margin
+    # Each iteration records how far its laps strayed beyond their margins; a run kept before
+    # that was recorded has it measured again from its laps when it resumes.
+    summary_path = tmp_path / "iteration_01" / "summary.json"
+    summary = json.loads(summary_path.read_text())
+    assert summary["result"]["margin_excess_m"] == two.iterations[1].margin_excess_m is not None
+    del summary["result"]["margin_excess_m"]
+    summary_path.write_text(json.dumps(summary))
+    resumed = learn("expressway", LearnSettings(iterations=2, seeds=1, inducing=10), out=tmp_path)
+    assert resumed.iterations[1].margin_excess_m == pytest.approx(two.iterations[1].margin_excess_m)
     # A damaged lap that the loop learns from (iteration 0's laps, driven with the blanket
     # margins, are clean) is refused when the run resumes.
     kept = json.loads((tmp_path / "iteration_00" / "summary.json").read_text())["clean_logs"]

@@ -40,9 +40,9 @@ tyres' slip angle within the plan's slip margin (``CarModel.slip_share``): witho
 laps on circuits with hairpins left the track.
 
 The run's result (:meth:`LearningRun.best`) is its fastest clean iteration whose laps stayed
-within the edge margins their plan kept: four clean laps that strayed beyond them were clean only
-because they strayed where their line was not beside a wall
-(:func:`~racing_lib.experiments.track_margins.margin_excess`).
+within the edge margins their plan kept (the fastest clean one when none did): four clean laps
+that strayed beyond them were clean only because they strayed where their line was not beside a
+wall (:func:`~racing_lib.experiments.track_margins.margin_excess`).
 
 Every finished iteration is written to its own folder, with the run's track, settings and model
 in ``run.json``, so an interrupted run resumes where it stopped and loses no finished iteration;
@@ -56,7 +56,7 @@ import math
 import os
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
 from zipfile import BadZipFile
@@ -66,7 +66,7 @@ import numpy as np
 from racing_lib.errors import ArgumentError, ModelError, PlanningError
 from racing_lib.experiments.ablation.table import known_best_lap
 from racing_lib.experiments.lap import LapLog, LapResult, PlantFactory
-from racing_lib.experiments.learning_results import IterationResult, LearningRun
+from racing_lib.experiments.learning_results import IterationResult, LearningRun, beyond_text
 from racing_lib.experiments.pipeline import RaceResult, race
 from racing_lib.experiments.track_margins import (
     EDGE_SAFETY,
@@ -104,7 +104,7 @@ __all__ = [
     "slip_share",
 ]
 
-#: Smallest factor on the uncertainty margin that clean iterations may bring the loop to.
+#: Smallest factor on the uncertainty and slip margins that clean iterations may bring the loop to.
 MIN_CAUTION = 0.5
 
 
@@ -250,7 +250,7 @@ def _save_done(
 
 
 def _caution(previous: IterationResult | None) -> float:
-    """Factor on the uncertainty margin, set by how the learned iteration before went.
+    """Factor on the uncertainty and slip margins, set by how the learned iteration before went.
 
     The laps of an iteration that touched a wall are not learned from, so the next one would fit
     nearly the same correction and make nearly the same plan: after one, the factor doubles and
@@ -275,9 +275,20 @@ def slip_share(caution: float) -> float:
 
     The planner's margin below the peak (5 %, ``TimeOptimalSettings.slip_force_share``) stands
     in for what the model does not know of the tyres near it. Learned iterations scale it by
-    their caution, as they do the uncertainty margin: 5 % in the first, 2.5 % after a clean one,
-    10 % after one that was not clean (at most 50 %). On the expressway, 2.5 % instead of 5 %
-    made the second iteration's plan 0.34 s faster (103.26 s), and its laps 0.36 s (103.68 s).
+    their caution, as they do the uncertainty margin: 5 % in the first (caution 1), 2.5 % at
+    :data:`MIN_CAUTION`, twice the last iteration's after one that was not clean (at most 50 %).
+    On the expressway, 2.5 % instead of 5 % made the second iteration's plan 0.34 s faster
+    (103.26 s), and its laps 0.36 s (103.68 s).
+
+    Parameters
+    ----------
+    caution : float
+        The iteration's factor on its margins (:func:`_caution`), dimensionless.
+
+    Returns
+    -------
+    float
+        Share of the peak force, in (0.5, 1].
     """
     gap = (1.0 - TimeOptimalSettings.slip_force_share) * caution
     return 1.0 - min(gap, 0.5)
@@ -286,7 +297,11 @@ def slip_share(caution: float) -> float:
 def _iteration_model(
     base: CarModel, correction: ModelCorrection | None, settings: LearnSettings, caution: float
 ) -> CarModel:
-    """The model iteration i plans and predicts with."""
+    """The model an iteration plans and predicts with: ``base``, or ``base`` corrected.
+
+    A corrected model keeps no blanket grip margin (the plan's uncertainty margin replaces it),
+    the settings' edge margin (m) and the slip margin of ``caution`` (:func:`slip_share`).
+    """
     if correction is None:
         return base
     # the least distance to an edge; where the laps strayed further, the track the plan is made
@@ -362,6 +377,10 @@ def learn(
         done = None if out_dir is None else _load_done(out_dir, i)
         if done is not None:
             result, new_logs, model = done
+            if result.margin_excess_m is None and result.clean:
+                # kept before the excess was recorded: a clean iteration keeps all its laps
+                excess = margin_excess(new_logs, track_obj, plan_track, model.edge_margin)
+                result = replace(result, margin_excess_m=excess)
             say(f"iteration {i}: kept from {_iteration_dir(out_dir, i)}")
         else:
             if out_dir is not None and _load_done(out_dir, i + 1) is not None:
@@ -567,8 +586,8 @@ def _line(it: IterationResult) -> str:
     """One line for people about an iteration."""
     driven = "not completed" if it.driven_lap_s is None else f"{it.driven_lap_s:.2f} s"
     gap = "" if it.gap_to_best_pct is None else f" ({it.gap_to_best_pct:+.2f} % on the best lap)"
-    excess = it.margin_excess_m
-    beyond = "" if excess is None or excess <= 0.0 else f", {excess:.2f} m beyond its edge margin"
+    excess = beyond_text(it.margin_excess_m)
+    beyond = "" if excess == "-" else f", {excess} beyond its edge margins"
     return (
         f"iteration {it.iteration}: plan {it.planned_lap_s:.2f} s, driven {driven}{gap}, "
         f"{it.walls} wall contacts, {it.offtrack_s:.1f} s off track{beyond}, "

@@ -14,7 +14,18 @@ from typing import Any
 from racing_lib.geometry import Track
 from racing_lib.model import CarModel
 
-__all__ = ["IterationResult", "LearningRun"]
+__all__ = ["IterationResult", "LearningRun", "beyond_text"]
+
+
+def beyond_text(excess: float | None) -> str:
+    """How far laps strayed beyond their edge margins, for a table: "-" when within, else m.
+
+    An excess under a centimetre reads "< 0.01 m", not "0.00 m": the iteration is not within its
+    margins (:attr:`IterationResult.within_margins`), however little it strayed.
+    """
+    if excess is None or excess <= 0.0:
+        return "-"
+    return "< 0.01 m" if excess < 0.005 else f"{excess:.2f} m"
 
 
 @dataclass
@@ -65,7 +76,7 @@ class IterationResult:
     margin_excess_m : float or None
         How far the laps strayed from their line beyond the edge margin the plan kept there, m
         (:func:`~racing_lib.experiments.track_margins.margin_excess`): zero or less when the
-        margin held every excursion. None in a run kept before it was measured.
+        margin held every excursion. None without a lap.
     """
 
     iteration: int
@@ -157,7 +168,7 @@ class LearningRun:
         return 100.0 * (1.0 - it.driven_lap_s / first)
 
     def best(self) -> IterationResult | None:
-        """The fastest clean iteration whose laps stayed within their edge margins.
+        """The run's result: the fastest clean iteration whose laps stayed within their margins.
 
         A few clean laps that strayed beyond the margin their plan kept were clean by luck
         (:attr:`IterationResult.within_margins`); when no clean iteration stayed within, the

@@ -106,13 +106,32 @@ def planning_track(track: Track, logs: Sequence[LapLog], margin: float) -> Track
 def largest_margin(margin: float | None, track: Track, plan_track: Track) -> float | None:
     """The largest distance from the edges of ``track`` a plan on ``plan_track`` keeps, m.
 
-    ``margin``: the plan's edge margin, m (None: the planner's default, on ``track`` itself).
+    Parameters
+    ----------
+    margin : float or None
+        The plan's edge margin, m (None: the planner's default, on ``track`` itself).
+    track : Track
+        The track.
+    plan_track : Track
+        The track the plan was made on: ``track``, or ``track`` narrowed (:func:`planning_track`).
+
+    Returns
+    -------
+    float or None
+        ``margin`` plus the largest narrowing, m (None when ``margin`` is).
     """
     if margin is None or plan_track is track:
         return margin
+    return float(margin + np.max(_narrowing(track, plan_track)))
+
+
+def _narrowing(track: Track, plan_track: Track) -> np.ndarray:
+    """How much narrower ``plan_track`` is than ``track`` on each side at the knots, m.
+
+    :func:`planning_track` narrows both sides by the same amount, so one side says it.
+    """
     knots = track.centerline.knots
-    cut = track.width_left(knots) - plan_track.width_left(knots)
-    return float(margin + np.max(cut))
+    return np.asarray(track.width_left(knots) - plan_track.width_left(knots), dtype=float)
 
 
 def margin_excess(
@@ -146,17 +165,23 @@ def margin_excess(
         its line less the margin kept at that point, m: zero or less when the margin held every
         excursion. None without a lap.
     """
-    if not logs:
-        return None
     kept = default_margin(track) if margin is None else margin
     knots = track.centerline.knots
     length = float(track.length)
-    cut = np.asarray(track.width_left(knots) - plan_track.width_left(knots), dtype=float)
-    worst = -np.inf
+    cut = _narrowing(track, plan_track)
+    worst = None
     for log in logs:
-        laps = np.asarray(log.in_lap, dtype=bool)
-        s = np.mod(np.asarray(log.s_track, dtype=float)[laps], length)
-        here = kept + np.interp(s, knots, cut, period=length)
-        if s.size:
-            worst = max(worst, float(np.max(np.abs(log.ey[laps]) - here)))
-    return None if worst == -np.inf else worst
+        # the lap between its two line crossings (the whole log of a lap that never crossed)
+        lap = np.asarray(log.in_lap, dtype=bool)
+        if not lap.any():
+            lap = np.ones_like(lap)
+        if not lap.any():
+            continue
+        s = np.mod(np.asarray(log.s_track, dtype=float)[lap], length)
+        # either side: the line runs beside either edge somewhere, and a lap that strayed this
+        # far to one side here may stray as far to the other where the line hugs that edge
+        beyond = np.abs(np.asarray(log.ey, dtype=float)[lap]) - (
+            kept + np.interp(s, knots, cut, period=length)
+        )
+        worst = float(beyond.max()) if worst is None else max(worst, float(beyond.max()))
+    return worst

@@ -48,7 +48,12 @@ def cmd_learn(args: argparse.Namespace) -> int:
     gap = "" if best.gap_to_best_pct is None else f", {best.gap_to_best_pct:+.2f} % on the best lap"
     gain = run.gain_pct(best)
     gain_text = "" if gain is None else f", {gain:.2f} % faster than the identified model"
-    print(f"best clean iteration: {best.iteration}, {best.driven_lap_s:.2f} s{gap}{gain_text}")
+    how = (
+        "the fastest clean one within its edge margins"
+        if best.within_margins
+        else "no clean iteration stayed within its edge margins: the fastest clean one"
+    )
+    print(f"result: iteration {best.iteration} ({how}), {best.driven_lap_s:.2f} s{gap}{gain_text}")
     return 0
 
 

@@ -87,7 +87,8 @@ class CarModel:
     slip_share : float or None
         The tyres' slip margin, in (0, 1]: the plans keep both axles' slip angles where the
         tyres give at most this share of their peak force, and an MPC predicting with a learned
-        correction keeps the front axle's there too. None (default): the planner's setting
+        correction keeps the front axle's there too; set, it takes the place of the planner's
+        setting, as the model's edge margin does. None (default): the planner's setting
         (:attr:`racing_lib.planning.TimeOptimalSettings.slip_force_share`, 95 %) and, with a
         correction, :data:`racing_lib.control.mpc.coupled.LEARNED_SLIP_SHARE`. The learning loop
         sets it from how its iterations went (:mod:`racing_lib.experiments.learning`).

@@ -131,7 +131,7 @@ class CoupledMPC(MPCBase):
         # bounds the slip angles; with a learned model the MPC does too, on the front axle,
         # which the steering acts on. The model as identified is left as the paper has it.
         params = self.model.params
-        share = self.model.slip_share or LEARNED_SLIP_SHARE
+        share = LEARNED_SLIP_SHARE if self.model.slip_share is None else self.model.slip_share
         self.front_slip_limit = (
             params.slip_angle_at(share)[0] if params.correction is not None else None
         )
