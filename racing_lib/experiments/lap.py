@@ -131,6 +131,16 @@ class LapLog(Drive):
             if size != n:
                 raise ModelError(f"lap log: {key} has {size} samples, t has {n}.")
 
+    @property
+    def lap_steps(self) -> np.ndarray:
+        """Mask of the lap's own steps: between its two line crossings (``in_lap``).
+
+        Every step of a log whose car never crossed the line, so that its measures (tracking
+        error, speed error) still say how it drove.
+        """
+        in_lap = np.asarray(self.in_lap, dtype=bool)
+        return in_lap if in_lap.any() else np.ones_like(in_lap)
+
 
 @dataclass
 class LapResult:
@@ -316,7 +326,7 @@ def _metrics(
     counters_at_start: dict[str, float],
 ) -> LapMetrics:
     completed = t_start is not None and t_end is not None
-    mask = log.in_lap if log.in_lap.any() else np.ones_like(log.in_lap)
+    mask = log.lap_steps
     vx_err = np.abs(log.vx[mask] - log.vx_ref[mask])
     ey = np.abs(log.ey[mask])
     end = _plant_counters(plant)

@@ -288,7 +288,7 @@ def slip_share(caution: float) -> float:
     Returns
     -------
     float
-        Share of the peak force, in (0.5, 1].
+        Share of the peak force, in [0.5, 1).
     """
     gap = (1.0 - TimeOptimalSettings.slip_force_share) * caution
     return 1.0 - min(gap, 0.5)

@@ -171,11 +171,8 @@ def margin_excess(
     cut = _narrowing(track, plan_track)
     worst = None
     for log in logs:
-        # the lap between its two line crossings (the whole log of a lap that never crossed)
-        lap = np.asarray(log.in_lap, dtype=bool)
-        if not lap.any():
-            lap = np.ones_like(lap)
-        if not lap.any():
+        lap = log.lap_steps
+        if not lap.size:
             continue
         s = np.mod(np.asarray(log.s_track, dtype=float)[lap], length)
         # either side: the line runs beside either edge somewhere, and a lap that strayed this

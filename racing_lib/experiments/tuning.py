@@ -179,8 +179,7 @@ def tuning_objective(
         # exp keeps the score in (P, 2P] for any forward progress, monotone in the distance.
         return float(incomplete_penalty * (1.0 + math.exp(-max(covered, -10.0 * length) / length)))
 
-    in_lap = np.asarray(log.in_lap, dtype=bool)
-    mask = in_lap if in_lap.any() else np.ones_like(in_lap)
+    mask = log.lap_steps
     ey = np.abs(np.asarray(log.ey, dtype=float)[mask])
     vx_err = np.abs(np.asarray(log.vx, dtype=float)[mask] - np.asarray(log.vx_ref, float)[mask])
     if ey.size == 0:

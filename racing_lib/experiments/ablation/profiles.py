@@ -51,7 +51,7 @@ def profile_grid(track: Track) -> np.ndarray:
 
 def closed_loop_profile(log: LapLog, track: Track) -> dict[str, list[float | None]]:
     """The closed-loop lap on the track-centerline grid (every :data:`PROFILE_SPACING` m)."""
-    lap = log.in_lap if log.in_lap.any() else np.ones_like(log.in_lap)
+    lap = log.lap_steps
     s = np.asarray(log.s_track, dtype=float)[lap]
     vx = np.asarray(log.vx, dtype=float)[lap]
     _, n, _ = track.centerline.to_frenet(log.x[lap], log.y[lap], s_hint=s)

@@ -170,7 +170,7 @@ def _trial(spec: LapSpec, seed: int, profile_seed: int | None = None) -> _TrialO
     wall = time.perf_counter() - tic
     log = res.log
     # The steps between the two line crossings, as in the lap metrics.
-    lap = log.in_lap if log.in_lap.any() else np.ones_like(log.in_lap)
+    lap = log.lap_steps
     profile = None
     if seed == profile_seed:
         profile = {"seed": seed, "completed": res.metrics.completed}
