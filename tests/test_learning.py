@@ -530,6 +530,13 @@ def test_the_margins_follow_what_the_laps_showed():
     assert learned.slip_share == pytest.approx(TimeOptimalSettings().slip_force_share)
     assert _iteration_model(base, corr, settings, 0.5).slip_share == pytest.approx(0.975)
     assert slip_share(2.0) == pytest.approx(0.9) and slip_share(64.0) == 0.5
+    # the stability margin of a car that diverged under braking: the identified one times the
+    # caution; a car without one gets none
+    assert learned.lateral_stability is None
+    braking = base.replace(lateral_stability=1.8)
+    assert _iteration_model(braking, corr, settings, 1.0).lateral_stability == pytest.approx(1.8)
+    assert _iteration_model(braking, corr, settings, 0.5).lateral_stability == pytest.approx(0.9)
+    assert _iteration_model(braking, None, settings, 0.5).lateral_stability == pytest.approx(1.8)
 
 
 def test_a_run_reports_its_gain_over_the_identified_model():

@@ -83,7 +83,8 @@ class CarModel:
         within its rate limit. Set by identification for a car that diverged in yaw when it
         braked with the steering held: the margin is how much faster it diverged than the
         model said. None (default): no such bound, as for the simulated car, which stays
-        stable there.
+        stable there. The learning loop scales it by its caution, as it does the slip margin
+        (:mod:`racing_lib.experiments.learning`).
     slip_share : float or None
         The tyres' slip margin, in (0, 1]: the plans keep both axles' slip angles where the
         tyres give at most this share of their peak force, and an MPC predicting with a learned
